@@ -1,0 +1,81 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+#include "lftag/tag_id.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace lftag {
+namespace {
+
+using u128 = unsigned __int128;
+
+u128 to_u128(TagId id) { return (u128(id.high()) << 64) | id.low(); }
+TagId from_u128(u128 v) { return TagId(std::uint64_t(v >> 64), std::uint64_t(v)); }
+
+int hex_value(char c) {
+  if (c >= '0' && c <= '9') return c - '0';
+  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+  return -1;
+}
+
+}  // namespace
+
+TagId TagId::parse(std::string_view text) {
+  const std::string quoted = "'" + std::string(text) + "'";
+  const bool hex = text.size() > 2 && text[0] == '0' && (text[1] == 'x' || text[1] == 'X');
+  const std::string_view digits = hex ? text.substr(2) : text;
+  if (digits.empty()) throw std::invalid_argument("id " + quoted + " is not a number");
+  const unsigned base = hex ? 16 : 10;
+  const u128 max = ~u128(0);
+  u128 value = 0;
+  for (char c : digits) {
+    const int d = hex_value(c);
+    if (d < 0 || unsigned(d) >= base)
+      throw std::invalid_argument("id " + quoted + " is not a " +
+                                  (hex ? "hexadecimal" : "decimal") + " number");
+    if (value > (max - unsigned(d)) / base)
+      throw std::invalid_argument("id " + quoted + " does not fit in 128 bits");
+    value = value * base + unsigned(d);
+  }
+  return from_u128(value);
+}
+
+std::string TagId::to_decimal() const {
+  u128 v = to_u128(*this);
+  std::string out;
+  do {
+    out.push_back(char('0' + int(v % 10)));
+    v /= 10;
+  } while (v != 0);
+  std::reverse(out.begin(), out.end());
+  return out;
+}
+
+std::string TagId::to_hex() const {
+  static const char kDigits[] = "0123456789abcdef";
+  u128 v = to_u128(*this);
+  std::string out;
+  do {
+    out.push_back(kDigits[int(v & 15)]);
+    v >>= 4;
+  } while (v != 0);
+  std::reverse(out.begin(), out.end());
+  return "0x" + out;
+}
+
+int TagId::digit(int k) const {
+  if (k < 0 || k >= 64) throw std::out_of_range("id digit index out of range");
+  return int((to_u128(*this) >> (2 * k)) & 3);
+}
+
+TagId TagId::with_digit(int k, int value) const {
+  if (k < 0 || k >= 64 || value < 0 || value > 3)
+    throw std::out_of_range("id digit index or value out of range");
+  const u128 mask = u128(3) << (2 * k);
+  return from_u128((to_u128(*this) & ~mask) | (u128(value) << (2 * k)));
+}
+
+std::string to_string(TagId id) { return id.to_decimal(); }
+
+}  // namespace lftag

@@ -1,0 +1,53 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// OpenCV pinhole camera with (k1, k2, p1, p2[, k3[, k4, k5, k6]]) distortion.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace lftag {
+
+struct Camera {
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  int width = 0, height = 0;         // 0 when unknown
+  std::vector<double> distortion;    // empty: no distortion
+  // False for the default camera: decoding works, but metric poses assume a guessed focal length.
+  bool calibrated = false;
+
+  // The documented default for a frame without calibration: square pixels, a
+  // horizontal focal length equal to the frame width (a 53 degree field of view),
+  // principal point at the frame centre (pixel centres at integer coordinates).
+  static Camera default_for(int width, int height);
+  static Camera pinhole(double fx, double fy, double cx, double cy, int width = 0, int height = 0);
+
+  // Reads an OpenCV FileStorage file (YAML, XML or JSON) with `camera_matrix` and
+  // `distortion_coefficients` (OpenCV's calibration samples) or `cameraMatrix` and
+  // `distCoeffs` (GStreamer's cameracalibrate), plus optional `image_width`/`image_height`.
+  // Throws std::runtime_error naming the file and what is wrong with it.
+  static Camera load(const std::string& path);
+  // Same, from FileStorage text in memory (`source` names it in messages).
+  static Camera parse(const std::string& text, const std::string& source = "calibration");
+  // Writes the OpenCV calibration-sample format.
+  void save(const std::string& path) const;
+
+  // The camera for a frame of another size: intrinsics scale with the frame when the
+  // calibration's own size is known and differs. Throws if the aspect ratio changes.
+  Camera for_frame(int frame_width, int frame_height) const;
+
+  bool has_distortion() const;
+  cv::Matx33d matrix() const;
+  cv::Mat distortion_mat() const;  // 1 x N CV_64F (N >= 4) or empty
+
+  // Pixel coordinates -> ideal (undistorted) pixel coordinates of the same camera matrix.
+  std::vector<cv::Point2d> undistort(const std::vector<cv::Point2d>& pixels) const;
+  // Camera-frame 3-D points -> pixel coordinates, distortion applied.
+  std::vector<cv::Point2d> project(const std::vector<cv::Point3d>& points,
+                                   const cv::Vec3d& rvec = {}, const cv::Vec3d& tvec = {}) const;
+
+  // Throws std::invalid_argument when the parameters cannot describe a camera.
+  void validate() const;
+};
+
+}  // namespace lftag

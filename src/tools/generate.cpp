@@ -1,0 +1,100 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// lftag generate: one marker, or a sheet of many, as SVG, PDF or PNG.
+#include <cstdlib>
+#include <iostream>
+#include <stdexcept>
+
+#include "commands.hpp"
+#include "lftag/render.hpp"
+
+namespace lftag::tools {
+namespace {
+
+// "100mm", "10cm", "0.1m", "4in" -> metres. A bare number is millimetres.
+double parse_length(const std::string& text) {
+  std::size_t end = 0;
+  double value = 0;
+  try {
+    value = std::stod(text, &end);
+  } catch (const std::exception&) {
+    throw std::invalid_argument("size '" + text + "' is not a length such as 100mm, 10cm, 0.1m or 4in");
+  }
+  const std::string unit = text.substr(end);
+  double scale = 0;
+  if (unit.empty() || unit == "mm") scale = 0.001;
+  else if (unit == "cm") scale = 0.01;
+  else if (unit == "m") scale = 1.0;
+  else if (unit == "in") scale = 0.0254;
+  else throw std::invalid_argument("size '" + text + "' has an unknown unit: use mm, cm, m or in");
+  if (!(value > 0)) throw std::invalid_argument("size '" + text + "' must be positive");
+  return value * scale;
+}
+
+// "7", "0x1f", "1,2,5-9" -> ids. Ranges are for ids below 2^64 and hold at most 100000 ids.
+std::vector<TagId> parse_ids(const std::string& text) {
+  std::vector<TagId> ids;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = std::min(text.find(',', start), text.size());
+    const std::string item = text.substr(start, comma - start);
+    const std::size_t dash = item.find('-');
+    if (dash == std::string::npos) {
+      ids.push_back(TagId::parse(item));
+    } else {
+      const TagId lo = TagId::parse(item.substr(0, dash)), hi = TagId::parse(item.substr(dash + 1));
+      if (!lo.fits_u64() || !hi.fits_u64() || hi < lo || hi.low() - lo.low() >= 100000)
+        throw std::invalid_argument("id range '" + item + "' must run upwards over at most 100000 ids");
+      for (std::uint64_t v = lo.low(); v <= hi.low(); ++v) ids.emplace_back(v);
+    }
+    start = comma + 1;
+  }
+  return ids;
+}
+
+}  // namespace
+
+void add_generate_command(CLI::App& app, int& status) {
+  struct Options {
+    std::string family, ids, size = "100mm", output, paper = "a4";
+    double margin = 2.0, dpi = 300;
+    bool no_caption = false, sheet = false;
+  };
+  auto opt = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand("generate", "Write a printable marker (or a sheet of markers) as SVG, PDF or PNG.");
+  cmd->add_option("--family", opt->family, "Marker family: 2x2, 3x3, 4x4, 5x5, 6x6, 7x7 or 8x8")->required();
+  cmd->add_option("--id", opt->ids,
+                  "Marker id, decimal or 0x-hexadecimal; for a sheet a list with ranges, e.g. 0-11,40")
+      ->required();
+  cmd->add_option("--size", opt->size, "Outer edge of the black border: 100mm, 10cm, 0.1m or 4in (default 100mm)");
+  cmd->add_option("--margin", opt->margin, "White margin around the border, in marker units (default 2)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--dpi", opt->dpi, "PNG resolution in pixels per inch (default 300)")->check(CLI::PositiveNumber);
+  cmd->add_flag("--no-caption", opt->no_caption, "Leave out the caption (family, id, size) under the marker");
+  cmd->add_flag("--sheet", opt->sheet, "Lay the ids out on pages for printing (implied by several ids)");
+  cmd->add_option("--paper", opt->paper, "Sheet paper size: a4 or letter (default a4)");
+  cmd->add_option("--output,-o", opt->output, "Output file; .svg, .pdf or .png")->required();
+  cmd->callback([opt, &status] {
+    try {
+      const Family family = Family::parse(opt->family);
+      const std::vector<TagId> ids = parse_ids(opt->ids);
+      PrintOptions print;
+      print.size_m = parse_length(opt->size);
+      print.margin_units = opt->margin;
+      print.caption = !opt->no_caption;
+      print.dpi = opt->dpi;
+      if (opt->sheet || ids.size() > 1) {
+        const int pages = write_sheet(opt->output, family, ids, print, parse_paper(opt->paper));
+        std::cerr << "wrote " << ids.size() << " markers on " << pages << " page" << (pages > 1 ? "s" : "")
+                  << " to " << opt->output << "\n";
+      } else {
+        write_marker(opt->output, family, ids.front(), print);
+      }
+      status = 0;
+    } catch (const std::exception& e) {
+      std::cerr << "lftag generate: " << e.what() << "\n";
+      status = 1;
+    }
+  });
+}
+
+}  // namespace lftag::tools

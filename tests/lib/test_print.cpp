@@ -1,0 +1,93 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+#include <fstream>
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "lftag/render.hpp"
+
+using namespace lftag;
+
+namespace {
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+int count(const std::string& text, const std::string& what) {
+  int n = 0;
+  for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+  return n;
+}
+
+}  // namespace
+
+TEST(Print, PngMarkerIsTheExactRasterAtTheRequestedResolution) {
+  PrintOptions o;
+  o.size_m = 0.0508;  // 2 inches at 150 dpi: 300 px for the 24 u border, 12.5 px per unit
+  o.dpi = 150;
+  o.caption = false;
+  const std::string path = testing::TempDir() + "/m.png";
+  write_marker(path, Family(3), 6789, o);
+  const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
+  ASSERT_EQ(image.cols, 350);  // (24 + 2 * 2) u * 12.5 px
+  ASSERT_EQ(image.rows, 350);
+  const cv::Mat1b expected = rasterize_marker(Family(3), 6789, 12.5, 2);
+  EXPECT_EQ(cv::norm(image, expected, cv::NORM_INF), 0.0);
+  // With a caption the image grows below and the marker is unchanged.
+  o.caption = true;
+  write_marker(path, Family(3), 6789, o);
+  const cv::Mat captioned = cv::imread(path, cv::IMREAD_GRAYSCALE);
+  EXPECT_GT(captioned.rows, 350);
+  EXPECT_EQ(cv::norm(captioned(cv::Rect(0, 0, 350, 350)), expected, cv::NORM_INF), 0.0);
+  EXPECT_LT(cv::mean(captioned(cv::Rect(0, 350, 350, captioned.rows - 350)))[0], 254.0);  // some text
+}
+
+TEST(Print, SvgAndPdfCarryTheVectorGeometry) {
+  PrintOptions o;
+  o.size_m = 0.1;
+  const std::string svg = testing::TempDir() + "/m.svg", pdf = testing::TempDir() + "/m.pdf";
+  write_marker(svg, Family(4), 12345, o);
+  write_marker(pdf, Family(4), 12345, o);
+  const std::string s = slurp(svg), p = slurp(pdf);
+  EXPECT_NE(s.find("<svg"), std::string::npos);
+  // 100 mm + 2 * (2/30) * 100 mm margin = 113.33 mm = 321.26 pt wide.
+  EXPECT_NE(s.find("width=\"321.259843pt"), std::string::npos) << s.substr(0, 300);
+  EXPECT_EQ(p.rfind("%PDF", 0), 0u);
+  EXPECT_EQ(count(p, "/Type /Page\n") + count(p, "/Type /Page "), 1);
+}
+
+TEST(Print, SheetsFillPages) {
+  PrintOptions o;
+  o.size_m = 0.05;
+  std::vector<TagId> ids;
+  for (int i = 0; i < 40; ++i) ids.emplace_back(std::uint64_t(i));
+  const std::string pdf = testing::TempDir() + "/sheet.pdf";
+  const int pages = write_sheet(pdf, Family(3), ids, o, Paper::a4);
+  EXPECT_GE(pages, 2);
+  const std::string p = slurp(pdf);
+  EXPECT_EQ(count(p, "/Type /Page\n") + count(p, "/Type /Page "), pages);
+  // One page holds fewer than 40 markers of 5 cm: SVG and PNG refuse.
+  EXPECT_THROW(write_sheet(testing::TempDir() + "/sheet.svg", Family(3), ids, o, Paper::letter), std::invalid_argument);
+  ids.resize(6);
+  o.dpi = 100;
+  const std::string png = testing::TempDir() + "/sheet.png";
+  EXPECT_EQ(write_sheet(png, Family(3), ids, o, Paper::letter), 1);
+  const cv::Mat page = cv::imread(png, cv::IMREAD_GRAYSCALE);
+  EXPECT_EQ(page.cols, 850);   // 8.5 in at 100 dpi
+  EXPECT_EQ(page.rows, 1100);  // 11 in
+}
+
+TEST(Print, ErrorsAreClear) {
+  PrintOptions o;
+  EXPECT_THROW(write_marker(testing::TempDir() + "/m.bmp", Family(3), 1, o), std::invalid_argument);
+  EXPECT_THROW(write_marker("/nonexistent-dir/m.svg", Family(3), 1, o), std::runtime_error);
+  EXPECT_THROW(write_marker(testing::TempDir() + "/m.svg", Family(3), 16384, o), std::out_of_range);
+  o.size_m = 1.0;
+  EXPECT_THROW(write_sheet(testing::TempDir() + "/s.pdf", Family(3), {1}, o, Paper::a4), std::invalid_argument);
+  EXPECT_THROW(parse_paper("a5"), std::invalid_argument);
+}
