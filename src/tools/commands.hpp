@@ -9,5 +9,6 @@ namespace lftag::tools {
 
 void add_generate_command(CLI::App& app, int& status);
 void add_render_command(CLI::App& app, int& status);
+void add_detect_command(CLI::App& app, int& status);
 
 }  // namespace lftag::tools

@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
   int status = 0;
   lftag::tools::add_generate_command(app, status);
   lftag::tools::add_render_command(app, status);
+  lftag::tools::add_detect_command(app, status);
   CLI11_PARSE(app, argc, argv);
   return status;
 }

@@ -1,0 +1,138 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// Topological filtering (paper IV-B), vertex estimation (IV-C) and the area constraint.
+#include <algorithm>
+#include <cmath>
+
+#include "stages.hpp"
+
+namespace lftag::detail {
+namespace {
+
+double mean_grey(const RegionTree& tree, int region, const ImageView& image) {
+  double sum = 0;
+  long count = 0;
+  for (int i = tree.regions[region].first_run; i >= 0; i = tree.runs[i].next) {
+    const Run& run = tree.runs[i];
+    const std::uint8_t* row = image.data + run.y * image.stride;
+    for (int x = run.x0; x < run.x1; ++x) sum += row[x];
+    count += run.x1 - run.x0;
+  }
+  return count ? sum / count : 255.0;
+}
+
+}  // namespace
+
+Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary, int reach,
+                  double white) {
+  // The blob's window: its box grown by `reach`. In it, each pixel is the blob's own,
+  // another black region's, or white; a white pixel counts for the blob when the nearest
+  // black pixel within `reach` is the blob's (ties count half). So the anti-aliased edge
+  // of the blob counts and the edges of its neighbours and of the border do not.
+  const Region& r = tree.regions[region];
+  const int x0 = std::max(0, r.x0 - reach), y0 = std::max(0, r.y0 - reach);
+  const int x1 = std::min(image.width - 1, r.x1 + reach), y1 = std::min(image.height - 1, r.y1 + reach);
+  const int w = x1 - x0 + 1, h = y1 - y0 + 1;
+  enum : std::uint8_t { kWhite = 0, kOwn = 1, kOther = 2 };
+  thread_local std::vector<std::uint8_t> cls;
+  cls.assign(std::size_t(w) * h, kWhite);
+  for (int y = y0; y <= y1; ++y)
+    for (int x = x0; x <= x1; ++x)
+      if (binary.black(x, y)) cls[std::size_t(y - y0) * w + (x - x0)] = kOther;
+  for (int i = r.first_run; i >= 0; i = tree.runs[i].next) {
+    const Run& run = tree.runs[i];
+    std::fill_n(cls.begin() + std::size_t(run.y - y0) * w + (run.x0 - x0), run.x1 - run.x0, kOwn);
+  }
+
+  const int limit = reach * reach;  // a Euclidean radius: twice as accurate at 1 px per unit as the L-infinity ring
+  double m = 0, mx = 0, my = 0;
+  for (int y = y0; y <= y1; ++y) {
+    const std::uint8_t* row = image.data + y * image.stride;
+    const std::uint8_t* c = cls.data() + std::size_t(y - y0) * w;
+    for (int x = x0; x <= x1; ++x) {
+      double share = 0;
+      if (c[x - x0] == kOwn) {
+        share = 1;
+      } else if (c[x - x0] == kWhite) {
+        int own = limit + 1, other = limit + 1;
+        for (int dy = -reach; dy <= reach; ++dy) {
+          const int yy = y + dy;
+          if (yy < y0 || yy > y1) continue;
+          const std::uint8_t* cc = cls.data() + std::size_t(yy - y0) * w;
+          for (int dx = -reach; dx <= reach; ++dx) {
+            const int xx = x + dx;
+            if (xx < x0 || xx > x1) continue;
+            const int d2 = dx * dx + dy * dy;
+            if (cc[xx - x0] == kOwn) own = std::min(own, d2);
+            else if (cc[xx - x0] == kOther) other = std::min(other, d2);
+          }
+        }
+        share = own > limit ? 0.0 : own < other ? 1.0 : own == other ? 0.5 : 0.0;
+      }
+      if (share == 0) continue;
+      const double wgt = share * std::max(0.0, white - row[x]);
+      m += wgt, mx += wgt * x, my += wgt * y;
+    }
+  }
+
+  Blob b;
+  b.region = region;
+  b.area = r.area;
+  b.mass = m;
+  b.centroid = m > 0 ? cv::Point2d(mx / m, my / m) : cv::Point2d((r.x0 + r.x1) / 2.0, (r.y0 + r.y1) / 2.0);
+  return b;
+}
+
+void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
+                     const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
+                     DetectionStats& stats) {
+  out.clear();
+  stats.regions += std::int64_t(tree.regions.size());
+  int smallest = 1 << 30, largest = 0;
+  for (const Family& f : params.families) {
+    smallest = std::min(smallest, f.cell_count());
+    largest = std::max(largest, f.cell_count() + params.max_extra_children);
+  }
+  std::vector<int> kids;
+
+  for (int r = 1; r < int(tree.regions.size()); ++r) {
+    const Region& white = tree.regions[r];
+    if (white.black || white.child_count < smallest) continue;
+    // Children much smaller than the white region are noise, not blobs.
+    const double noise = white.area * params.noise_fraction;
+    kids.clear();
+    const int* child = tree.children_of(r);
+    for (int i = 0; i < white.child_count; ++i)
+      if (tree.regions[child[i]].area >= noise) kids.push_back(child[i]);
+    if (int(kids.size()) < smallest || int(kids.size()) > largest) continue;
+
+    for (const Family& f : params.families) {
+      const int n2 = f.cell_count();
+      if (int(kids.size()) < n2 || int(kids.size()) > n2 + params.max_extra_children) continue;
+      ++stats.topology;
+      // Keep the n^2 largest children.
+      std::partial_sort(kids.begin(), kids.begin() + n2, kids.end(),
+                        [&](int a, int b) { return tree.regions[a].area > tree.regions[b].area; });
+      Candidate c;
+      c.family = f;
+      c.white_region = r;
+      c.white_area = white.area;
+      c.white_level = params.centroid_reference == CentroidReference::local_white ? mean_grey(tree, r, image) : 255.0;
+      double lo = 1e300, hi = 0;
+      for (int i = 0; i < n2; ++i) {
+        c.blobs.push_back(measure_blob(tree, kids[i], image, binary, params.dilation, c.white_level));
+        lo = std::min(lo, c.blobs.back().mass);
+        hi = std::max(hi, c.blobs.back().mass);
+      }
+      // Area constraint on the blobs' ink (the zeroth moments): robust at a few pixels.
+      if (!(lo > 0) || hi > params.max_area_ratio * lo) continue;
+      ++stats.area;
+      std::vector<cv::Point2d> observed;
+      for (const Blob& b : c.blobs) observed.push_back(b.centroid);
+      const std::vector<cv::Point2d> ideal = camera.undistort(observed);
+      for (int i = 0; i < n2; ++i) c.blobs[i].point = ideal[i];
+      out.push_back(std::move(c));
+    }
+  }
+}
+
+}  // namespace lftag::detail

@@ -1,0 +1,241 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// Initial poses, their evaluation and decoding (paper IV-F to IV-H). K2 and K3 each have
+// four possible positions, so there are 16 hypotheses. Each is a homography from the four
+// key points (exact and closed-form, and it needs no camera intrinsics), scored by the
+// image gradient along the projected inner border edge; under each, every data cell takes
+// the nearest observed centroid among its four possible centres. The best normalised
+// residual wins.
+#include <cmath>
+#include <limits>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "stages.hpp"
+
+namespace lftag::detail {
+
+double elapsed_ms(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+void distort(const Camera& camera, std::vector<cv::Point2d>& points) {
+  if (!camera.has_distortion() || points.empty()) return;
+  std::vector<cv::Point3d> rays;
+  rays.reserve(points.size());
+  for (const cv::Point2d& p : points) rays.emplace_back((p.x - camera.cx) / camera.fx, (p.y - camera.cy) / camera.fy, 1.0);
+  points = camera.project(rays);
+}
+
+namespace {
+
+cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
+  const cv::Vec3d q = h * cv::Vec3d(p.x, p.y, 1.0);
+  return {q[0] / q[2], q[1] / q[2]};
+}
+
+// The local inverse of h at unit point u: pixels -> units.
+cv::Matx22d pixels_to_units(const cv::Matx33d& h, cv::Point2d u) {
+  const cv::Point2d dx = apply(h, u + cv::Point2d(0.5, 0)) - apply(h, u - cv::Point2d(0.5, 0));
+  const cv::Point2d dy = apply(h, u + cv::Point2d(0, 0.5)) - apply(h, u - cv::Point2d(0, 0.5));
+  return cv::Matx22d(dx.x, dy.x, dx.y, dy.y).inv();
+}
+
+// The 3x3 Sobel gradient at pixel (x, y), edges replicated.
+cv::Vec2d sobel(const ImageView& im, int x, int y) {
+  const int xm = std::max(x - 1, 0), xp = std::min(x + 1, im.width - 1);
+  const std::uint8_t* up = im.data + std::max(y - 1, 0) * im.stride;
+  const std::uint8_t* mid = im.data + y * im.stride;
+  const std::uint8_t* down = im.data + std::min(y + 1, im.height - 1) * im.stride;
+  const int gx = (up[xp] + 2 * mid[xp] + down[xp]) - (up[xm] + 2 * mid[xm] + down[xm]);
+  const int gy = (down[xm] + 2 * down[x] + down[xp]) - (up[xm] + 2 * up[x] + up[xp]);
+  return {double(gx), double(gy)};
+}
+
+// Sobel gradient magnitude at a sub-pixel point, bilinear between pixel gradients.
+double gradient_at(const ImageView& im, cv::Point2d p) {
+  const double x = std::clamp(p.x, 0.0, im.width - 1.0), y = std::clamp(p.y, 0.0, im.height - 1.0);
+  const int x0 = std::clamp(int(x), 0, std::max(0, im.width - 2));
+  const int y0 = std::clamp(int(y), 0, std::max(0, im.height - 2));
+  const int x1 = std::min(x0 + 1, im.width - 1), y1 = std::min(y0 + 1, im.height - 1);
+  const double fx = x - x0, fy = y - y0;
+  const cv::Vec2d g = (1 - fx) * (1 - fy) * sobel(im, x0, y0) + fx * (1 - fy) * sobel(im, x1, y0) +
+                      (1 - fx) * fy * sobel(im, x0, y1) + fx * fy * sobel(im, x1, y1);
+  return std::hypot(g[0], g[1]);
+}
+
+std::vector<cv::Point2d> square(double a, double b) {
+  return {cv::Point2d(a, a), cv::Point2d(b, a), cv::Point2d(b, b), cv::Point2d(a, b)};
+}
+
+// Bilinear grey level at a sub-pixel point.
+double grey_at(const ImageView& im, cv::Point2d p) {
+  const double x = std::clamp(p.x, 0.0, im.width - 1.0), y = std::clamp(p.y, 0.0, im.height - 1.0);
+  const int x0 = std::clamp(int(x), 0, std::max(0, im.width - 2));
+  const int y0 = std::clamp(int(y), 0, std::max(0, im.height - 2));
+  const int x1 = std::min(x0 + 1, im.width - 1), y1 = std::min(y0 + 1, im.height - 1);
+  const double fx = x - x0, fy = y - y0;
+  const std::uint8_t* r0 = im.data + y0 * im.stride;
+  const std::uint8_t* r1 = im.data + y1 * im.stride;
+  return (1 - fx) * (1 - fy) * r0[x0] + fx * (1 - fy) * r0[x1] + (1 - fx) * fy * r1[x0] + fx * fy * r1[x1];
+}
+
+// For 2x2, where the four blobs fix the homography and leave no residual: the fraction of
+// (should-be-white, should-be-black) sample pairs whose grey levels are in the wrong order.
+// Black: the square centres and the middle of the border; white: the middle of the white
+// ring inside the border and the middle of the cross between the squares.
+double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
+                        const Camera& camera) {
+  const double s = f.side();
+  std::vector<cv::Point2d> black_units = f.centers(id), white_units;
+  for (int i = 0; i < 8; ++i) {
+    const double t = 1 + (s - 2) * (i + 0.5) / 8;  // along the border's middle line
+    for (const cv::Point2d& p : {cv::Point2d(t, 1), cv::Point2d(s - 1, t), cv::Point2d(s - t, s - 1), cv::Point2d(1, s - t)})
+      black_units.push_back(p);
+    const double r = 3 + (s - 6) * (i + 0.5) / 8;  // along the white ring
+    for (const cv::Point2d& p : {cv::Point2d(r, 3), cv::Point2d(s - 3, r), cv::Point2d(s - r, s - 3), cv::Point2d(3, s - r)})
+      white_units.push_back(p);
+  }
+  white_units.emplace_back(s / 2, s / 2);
+  auto grey = [&](const std::vector<cv::Point2d>& units) {
+    std::vector<cv::Point2d> pixels;
+    for (const cv::Point2d& u : units) pixels.push_back(apply(h, u));
+    distort(camera, pixels);
+    std::vector<double> out;
+    for (const cv::Point2d& p : pixels) out.push_back(grey_at(image, p));
+    return out;
+  };
+  const std::vector<double> b = grey(black_units), w = grey(white_units);
+  int wrong = 0;
+  for (double wv : w)
+    for (double bv : b) wrong += wv <= bv;
+  return double(wrong) / (w.size() * b.size());
+}
+
+// See Decoding::ink_spread.
+double ink_spread(const Candidate& c, const Decoding& d) {
+  const Family& f = c.family;
+  std::vector<cv::Point2f> units, image;
+  std::vector<double> area;
+  for (int g = 0; g < f.cell_count(); ++g) {
+    const UnitRect sq = f.square(g, f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g)));
+    units.emplace_back(float(sq.x + sq.width / 2), float(sq.y + sq.height / 2));
+    image.emplace_back(cv::Point2f(c.blobs[d.blob_of_cell[g]].point));
+    area.push_back(sq.width * sq.height);
+  }
+  cv::Matx33d h = d.homography;
+  if (f.n() > 2) {
+    const cv::Mat fit = cv::findHomography(units, image, 0);
+    if (!fit.empty()) h = cv::Matx33d(fit);
+  }
+  const double det = cv::determinant(h);
+  double lo = 1e300, hi = 0;
+  for (int g = 0; g < f.cell_count(); ++g) {
+    // The Jacobian of a homography at (x, y) has determinant det(H) / w^3.
+    const double w = h(2, 0) * units[g].x + h(2, 1) * units[g].y + h(2, 2);
+    const double ink = c.blobs[d.blob_of_cell[g]].mass / (std::abs(det / (w * w * w)) * area[g]);
+    lo = std::min(lo, ink), hi = std::max(hi, ink);
+  }
+  return lo > 0 ? hi / lo : 1e300;
+}
+
+}  // namespace
+
+double edge_gradient(const ImageView& image, const Camera& camera, const cv::Matx33d& h, double a, double b) {
+  // About one sample per pixel of projected edge, at least 8 and at most 64 per side.
+  const std::vector<cv::Point2d> corners = square(a, b);
+  std::vector<cv::Point2d> samples;
+  for (int side = 0; side < 4; ++side) {
+    const cv::Point2d u0 = corners[side], u1 = corners[(side + 1) % 4];
+    const int count = std::clamp(int(cv::norm(apply(h, u1) - apply(h, u0))), 8, 64);
+    for (int i = 0; i < count; ++i) samples.push_back(apply(h, u0 + (u1 - u0) * ((i + 0.5) / count)));
+  }
+  distort(camera, samples);
+  double sum = 0;
+  for (const cv::Point2d& p : samples) sum += gradient_at(image, p);
+  return sum / samples.size();
+}
+
+std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const ImageView& image, const Camera& camera,
+                               const DetectorParams& params, DetectionStats& stats,
+                               std::vector<std::vector<cv::Point2d>>* hypotheses) {
+  const Family& f = c.family;
+  const int cells = f.cell_count(), side = f.side();
+  const std::array<int, 4> kc = f.keypoint_cells();
+  std::vector<cv::Point2f> observed(4);
+  for (int i = 0; i < 4; ++i) observed[i] = cv::Point2f(c.blobs[k.blob[i]].point);
+  const double tau3 = params.decode_threshold(f);
+  const double norm = std::sqrt(std::max(1.0, c.white_area));
+
+  std::optional<Decoding> best;
+  std::vector<char> used(c.blobs.size());
+  for (int hypothesis = 0; hypothesis < 16; ++hypothesis) {
+    auto start = std::chrono::steady_clock::now();
+    const int d2 = hypothesis / 4, d3 = hypothesis % 4;
+    const std::vector<cv::Point2f> units = {cv::Point2f(f.center(kc[0], 0)), cv::Point2f(f.center(kc[1], 0)),
+                                            cv::Point2f(f.center(kc[2], d2)), cv::Point2f(f.center(kc[3], d3))};
+    const cv::Mat hm = cv::getPerspectiveTransform(units, observed);
+    if (hm.empty()) continue;
+    const cv::Matx33d h(hm);
+    const double edge = edge_gradient(image, camera, h, 2, side - 2);
+    if (hypotheses) {
+      std::vector<cv::Point2d> outline;
+      for (const cv::Point2d& u : square(2, side - 2)) outline.push_back(apply(h, u));
+      distort(camera, outline);
+      hypotheses->push_back(outline);
+    }
+    stats.hypotheses_ms += elapsed_ms(start);
+    start = std::chrono::steady_clock::now();
+
+    Decoding d;
+    d.homography = h;
+    d.edge_score = edge;
+    d.blob_of_cell.assign(cells, -1);
+    std::fill(used.begin(), used.end(), 0);
+    d.blob_of_cell[kc[0]] = k.blob[0], d.blob_of_cell[kc[1]] = k.blob[1];
+    used[k.blob[0]] = used[k.blob[1]] = 1;
+    double residual = 0;
+    bool one_to_one = true;
+    for (int g = 0; g < cells && one_to_one; ++g) {
+      if (f.is_baseline(g)) continue;
+      double nearest = std::numeric_limits<double>::max();
+      int digit = 0, blob = -1;
+      for (int v = 0; v < 4; ++v) {
+        const cv::Point2d p = apply(h, f.center(g, v));
+        for (int j = 0; j < int(c.blobs.size()); ++j) {
+          const cv::Point2d e = c.blobs[j].point - p;
+          const double d2sq = e.dot(e);
+          if (d2sq < nearest) nearest = d2sq, digit = v, blob = j;
+        }
+      }
+      // Two cells claiming one blob cannot be this marker.
+      if (used[blob]) one_to_one = false;
+      used[blob] = 1;
+      d.blob_of_cell[g] = blob;
+      d.id = d.id.with_digit(f.data_index(g), digit);
+      residual += nearest;
+      const cv::Point2d off = c.blobs[blob].point - apply(h, f.center(g, digit));
+      d.worst_cell = std::max(d.worst_cell, cv::norm(pixels_to_units(h, f.center(g, digit)) * cv::Vec2d(off.x, off.y)));
+    }
+    if (!one_to_one || !(edge > 0)) {
+      stats.decode_ms += elapsed_ms(start);
+      continue;
+    }
+    if (f.n() == 2) {
+      // Four blobs fix the homography exactly, so the residual says nothing: the grey
+      // levels where the marker must be black or white decide, then the edge.
+      d.error = misordered_pairs(f, d.id, h, image, camera);
+      if (!best || d.error < best->error || (d.error == best->error && edge > best->edge_score)) best = d;
+    } else {
+      d.error = residual / norm / edge;
+      if (!best || d.error < best->error) best = d;
+    }
+    stats.decode_ms += elapsed_ms(start);
+  }
+  // tau3, and every digit clear of the midpoint between two positions.
+  if (!best || best->error > tau3 || best->worst_cell > params.max_cell_residual) return std::nullopt;
+  best->ink_spread = ink_spread(c, *best);
+  return best;
+}
+
+}  // namespace lftag::detail

@@ -1,0 +1,173 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// The chain of stages, with timing and the false-positive funnel.
+#include <cmath>
+#include <stdexcept>
+
+#include "stages.hpp"
+
+namespace lftag {
+
+using Clock = std::chrono::steady_clock;
+using detail::elapsed_ms;
+
+ImageView::ImageView(const std::uint8_t* d, int w, int h, std::ptrdiff_t s) : data(d), width(w), height(h), stride(s) {}
+
+ImageView::ImageView(const cv::Mat& grey) {
+  if (grey.type() != CV_8UC1 && !grey.empty())
+    throw std::invalid_argument("the detector needs an 8-bit, one-channel (grey) image");
+  data = grey.data, width = grey.cols, height = grey.rows, stride = std::ptrdiff_t(grey.step);
+}
+
+cv::Mat ImageView::mat() const {
+  if (empty()) return {};
+  return cv::Mat(height, width, CV_8UC1, const_cast<std::uint8_t*>(data), std::size_t(stride));
+}
+
+double decode_threshold_default(const Family& family) {
+  switch (family.n()) {
+    case 2: return 0.0;     // misordered black/white sample pairs (see decode.cpp): none
+    case 3: return 5e-4;    // the paper
+    case 4: return 1e-3;    // the paper
+    default: return 1e-3 * family.data_cell_count() / 14.0;  // the paper's per-cell value, scaled
+  }
+}
+
+double DetectorParams::decode_threshold(const Family& family) const {
+  const double t = max_decode_error[family.n()];
+  return t > 0 ? t : decode_threshold_default(family);
+}
+
+void DetectorParams::validate() const {
+  auto fail = [](const std::string& what) { throw std::invalid_argument(what); };
+  if (families.empty()) fail("no marker family to detect");
+  if (threshold_window < 2 || threshold_window > 1024) fail("threshold window must be 2 to 1024 pixels");
+  if (threshold_offset < 0 || threshold_offset > 255) fail("threshold offset must be 0 to 255");
+  if (!(noise_fraction >= 0 && noise_fraction < 1)) fail("noise fraction must be in [0, 1)");
+  if (max_extra_children < 0 || max_extra_children > 64) fail("extra children must be 0 to 64");
+  if (dilation < 0 || dilation > 8) fail("dilation must be 0 to 8 pixels");
+  if (!(max_area_ratio >= 1)) fail("the area ratio (tau1) must be at least 1");
+  if (!(min_spread_ratio >= 0 && min_spread_ratio <= 1)) fail("the spread ratio (tau2) must be in [0, 1]");
+  if (!(max_cell_residual > 0 && max_cell_residual <= 1)) fail("the cell residual bound must be in (0, 1] units");
+  if (!(max_ink_spread >= 1)) fail("the ink spread bound must be at least 1");
+  for (double t : max_decode_error)
+    if (!(t >= 0) || !std::isfinite(t)) fail("decode error thresholds (tau3) must be finite and not negative");
+  if (!(tag_size > 0) || !std::isfinite(tag_size)) fail("the tag size must be positive");
+  if (camera.fx != 0 || camera.fy != 0) camera.validate();
+}
+
+double DetectionStats::total_ms() const {
+  return threshold_ms + regions_ms + candidates_ms + keypoints_ms + hypotheses_ms + decode_ms + pose_ms;
+}
+
+DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
+  frames += o.frames, regions += o.regions, topology += o.topology, area += o.area, geometry += o.geometry;
+  angle += o.angle, collinearity += o.collinearity, decoded += o.decoded;
+  threshold_ms += o.threshold_ms, regions_ms += o.regions_ms, candidates_ms += o.candidates_ms;
+  keypoints_ms += o.keypoints_ms, hypotheses_ms += o.hypotheses_ms, decode_ms += o.decode_ms, pose_ms += o.pose_ms;
+  return *this;
+}
+
+struct Detector::Impl {
+  DetectorParams params;
+  cv::Mat mean;
+  detail::BinaryImage binary;
+  detail::RegionLabeller labeller;
+  detail::RegionTree tree;
+  std::vector<detail::Candidate> candidates;
+  Camera camera;  // for the last frame size
+  cv::Size camera_size;
+
+  const Camera& camera_for(int w, int h) {
+    if (camera_size != cv::Size(w, h)) {
+      camera = params.camera.fx > 0 ? params.camera.for_frame(w, h) : Camera::default_for(w, h);
+      camera_size = cv::Size(w, h);
+    }
+    return camera;
+  }
+};
+
+Detector::Detector(DetectorParams params) : impl_(std::make_unique<Impl>()) {
+  params.validate();
+  impl_->params = std::move(params);
+}
+Detector::~Detector() = default;
+Detector::Detector(Detector&&) noexcept = default;
+Detector& Detector::operator=(Detector&&) noexcept = default;
+
+const DetectorParams& Detector::params() const { return impl_->params; }
+
+std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* stats_out, DetectionTrace* trace) {
+  if (image.width < 0 || image.height < 0) throw std::invalid_argument("image size must not be negative");
+  if (!image.empty() && (image.data == nullptr || image.stride < image.width))
+    throw std::invalid_argument("image has no pixels or a stride shorter than its width");
+  Impl& s = *impl_;
+  DetectionStats stats;
+  stats.frames = 1;
+  std::vector<Detection> found;
+  if (trace) *trace = DetectionTrace{};
+  if (image.empty()) throw std::invalid_argument("the image is empty (" + std::to_string(image.width) + "x" +
+                                                 std::to_string(image.height) + ")");
+  const DetectorParams& p = s.params;
+  const Camera& camera = s.camera_for(image.width, image.height);
+
+  auto start = Clock::now();
+  detail::threshold_mean(image, p.threshold_window, p.threshold_offset, s.mean, s.binary);
+  stats.threshold_ms = elapsed_ms(start);
+  if (trace) trace->binary = s.binary.to_mat();
+
+  start = Clock::now();
+  s.labeller.label(s.binary, s.tree);
+  stats.regions_ms = elapsed_ms(start);
+
+  start = Clock::now();
+  detail::find_candidates(s.tree, s.binary, image, p, camera, s.candidates, stats);
+  stats.candidates_ms = elapsed_ms(start);
+
+  for (const detail::Candidate& c : s.candidates) {
+    if (trace) {
+      std::vector<cv::Point2d> centroids;
+      for (const detail::Blob& b : c.blobs) centroids.push_back(b.centroid);
+      trace->candidates.push_back(centroids);
+    }
+    start = Clock::now();
+    const std::vector<detail::KeyPoints> sides = detail::find_keypoints(c, p, stats);
+    stats.keypoints_ms += elapsed_ms(start);
+    // Of the decodings of the hull's sides, the one whose squares' ink matches the design.
+    std::optional<detail::KeyPoints> k;
+    std::optional<detail::Decoding> d;
+    for (const detail::KeyPoints& side : sides) {
+      if (trace) {
+        std::array<cv::Point2d, 4> points;
+        for (int i = 0; i < 4; ++i) points[i] = c.blobs[side.blob[i]].centroid;
+        trace->keypoints.push_back(points);
+        trace->hypotheses.emplace_back();
+      }
+      auto decoded = detail::decode(c, side, image, camera, p, stats, trace ? &trace->hypotheses.back() : nullptr);
+      if (decoded && decoded->ink_spread <= p.max_ink_spread && (!d || decoded->ink_spread < d->ink_spread)) {
+        d = decoded;
+        k = side;
+      }
+    }
+    if (!d) continue;
+    ++stats.decoded;
+
+    start = Clock::now();
+    Detection det;
+    det.family = c.family;
+    det.id = d->id;
+    det.decode_error = d->error;
+    det.worst_cell = d->worst_cell;
+    det.ink_spread = d->ink_spread;
+    det.edge_score = d->edge_score;
+    for (int g = 0; g < c.family.cell_count(); ++g) det.centroids.push_back(c.blobs[d->blob_of_cell[g]].centroid);
+    for (int i = 0; i < 4; ++i) det.keypoints[i] = c.blobs[k->blob[i]].centroid;
+    const bool posed = detail::estimate_pose(c, *d, camera, p, det);
+    stats.pose_ms += elapsed_ms(start);
+    if (posed) found.push_back(std::move(det));
+  }
+  if (trace) trace->detections = found;
+  if (stats_out) *stats_out += stats;
+  return found;
+}
+
+}  // namespace lftag

@@ -1,0 +1,165 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// The detector's stages as plain functions over plain data, in pipeline order
+// (paper section IV). Private to the library.
+#pragma once
+
+#include <array>
+#include <chrono>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "lftag/detector.hpp"
+
+namespace lftag::detail {
+
+// ---------------------------------------------------------------- threshold.cpp
+// One bit per pixel, set for black, rows padded to whole 64-bit words (padding is white).
+struct BinaryImage {
+  int width = 0, height = 0, words_per_row = 0;
+  std::vector<std::uint64_t> bits;
+  const std::uint64_t* row(int y) const { return bits.data() + std::size_t(y) * words_per_row; }
+  bool black(int x, int y) const { return (row(y)[x >> 6] >> (x & 63)) & 1; }
+  cv::Mat1b to_mat() const;  // 255 black, 0 white (for debug images)
+};
+
+// Black where a pixel is darker than the mean of the M x M window around it by more than
+// `offset`. `mean` is scratch space kept between frames.
+void threshold_mean(const ImageView& image, int window, int offset, cv::Mat& mean, BinaryImage& out);
+
+// ---------------------------------------------------------------- regions.cpp
+// A horizontal run of pixels of one region; runs of a region form a linked list.
+struct Run {
+  int y, x0, x1;  // pixels x0 .. x1 - 1 of row y
+  int next;       // next run of the same region, -1 at the end
+};
+
+struct Region {
+  bool black = false;
+  int parent = -1;  // enclosing region (-1 for the frame)
+  int area = 0;
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // bounding box, inclusive
+  int first_run = -1;
+  int first_child = 0, child_count = 0;  // into RegionTree::children
+};
+
+// The containment tree of the binary image. Black regions are 8-connected and white
+// regions 4-connected, so every boundary separates exactly one region from its parent.
+// The image is framed by white: region 0 is the white frame, holding every white pixel
+// connected to the image border.
+struct RegionTree {
+  std::vector<Region> regions;
+  std::vector<int> children;
+  std::vector<Run> runs;
+  static constexpr int kFrame = 0;
+  const int* children_of(int r) const { return children.data() + regions[r].first_child; }
+};
+
+// Single-pass labelling over runs with union-find; keeps its buffers between frames.
+class RegionLabeller {
+ public:
+  void label(const BinaryImage& binary, RegionTree& tree);
+
+ private:
+  // A provisional label: a union-find node with the statistics of its pixels so far.
+  struct Label {
+    int root, parent;  // union-find link; label of the region to the left of its first pixel
+    int area, x0, y0, x1, y1;
+    int head, tail;    // its run list
+    bool black;
+  };
+  struct RowRun {
+    int x0, x1, label;
+    bool black;
+  };
+  int find(int label);
+  int unite(int a, int b);
+  int create(bool black, int parent, int y);
+  void add_run(int label, int y, int x0, int x1);
+
+  std::vector<Label> labels_;
+  std::vector<RowRun> prev_, cur_;
+  std::vector<int> region_of_, child_fill_;
+  std::vector<Run>* runs_ = nullptr;
+};
+
+// ---------------------------------------------------------------- candidates.cpp
+struct Blob {
+  int region = -1;
+  int area = 0;          // pixels
+  double mass = 0;       // zeroth moment of the inverted grey image over the dilated region
+  cv::Point2d centroid;  // image pixels, as observed (distorted)
+  cv::Point2d point;     // undistorted pixels, for geometry
+};
+
+struct Candidate {
+  Family family{3};
+  int white_region = -1;
+  double white_area = 0;   // pixels of the white region
+  double white_level = 0;  // mean grey of the white region
+  std::vector<Blob> blobs; // the n^2 largest black children
+};
+
+// Topological filtering, vertex estimation and the area constraint. Counts into stats.
+void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
+                     const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
+                     DetectionStats& stats);
+
+// Centroid of the inverted grey image over `region` and the white pixels within `reach`
+// pixels of it that are nearer to it than to any other black pixel. `white` is the grey
+// level that weighs zero (255 for the paper's plain inversion).
+Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary, int reach,
+                  double white);
+
+// ---------------------------------------------------------------- keypoints.cpp
+// Blob indices of K0..K3 after the geometry, angle and collinearity constraints.
+struct KeyPoints {
+  std::array<int, 4> blob{};
+};
+
+// K0..K3 for each side of the centroids' hull that passes the constraints (in the order of
+// the paper's funnel, counted into stats when any side passes).
+std::vector<KeyPoints> find_keypoints(const Candidate& c, const DetectorParams& params, DetectionStats& stats);
+
+// Signed angle from a to b (radians), positive when b turns clockwise from a on screen (y down).
+double signed_angle(cv::Point2d a, cv::Point2d b);
+
+// ---------------------------------------------------------------- decode.cpp
+struct Decoding {
+  TagId id;
+  cv::Matx33d homography;           // units -> undistorted pixels
+  std::vector<int> blob_of_cell;    // grid order
+  double error = 0;                 // the paper's decoding error metric
+  double edge_score = 0;            // mean Sobel magnitude along the inner border edge
+  double worst_cell = 0;            // largest distance of a centroid from its cell's position, units
+  // Spread of the squares' ink per unit of design area (largest / smallest) under the
+  // homography fitted to all n^2 blobs: about 1 for the marker's true turn, at least
+  // (16/9)^2 when the baseline is taken on another side.
+  double ink_spread = 0;
+};
+
+// Tries the 16 key point hypotheses and returns the best decoding within tau3 and the
+// cell residual bound, with its ink spread.
+// `hypotheses`, when not null, receives every hypothesis' projected inner edge.
+// Times the hypotheses and the decoding into `stats`.
+std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const ImageView& image, const Camera& camera,
+                               const DetectorParams& params, DetectionStats& stats,
+                               std::vector<std::vector<cv::Point2d>>* hypotheses);
+
+// Mean 3x3 Sobel magnitude along the square x, y in {a, b} (units) under homography h.
+double edge_gradient(const ImageView& image, const Camera& camera, const cv::Matx33d& h, double a, double b);
+
+// Undistorted pixels -> distorted pixels of `camera`, in place.
+void distort(const Camera& camera, std::vector<cv::Point2d>& points);
+
+// Milliseconds since `start`, for the stage timings.
+double elapsed_ms(std::chrono::steady_clock::time_point start);
+
+// ---------------------------------------------------------------- pose.cpp
+// Final pose from all n^2 centroids; fills the pose fields, corners and centre.
+bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,
+                   Detection& out);
+
+}  // namespace lftag::detail

@@ -1,0 +1,171 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// The LFTag detector: finds, decodes and localises markers in a grey image.
+//
+//   lftag::Detector detector;                       // 3x3 and 4x4, paper defaults
+//   for (const lftag::Detection& d : detector.detect(lftag::ImageView(grey)))
+//     std::cout << d.family.name() << " " << d.id.to_decimal() << "\n";
+//
+// A Detector keeps its working buffers from frame to frame; use one per thread.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "lftag/camera.hpp"
+#include "lftag/family.hpp"
+
+namespace lftag {
+
+// A read-only view of 8-bit grey pixels (such as the luma plane of a video frame):
+// nothing is copied.
+struct ImageView {
+  const std::uint8_t* data = nullptr;
+  int width = 0;
+  int height = 0;
+  std::ptrdiff_t stride = 0;  // bytes from one row to the next
+
+  ImageView() = default;
+  ImageView(const std::uint8_t* data, int width, int height, std::ptrdiff_t stride);
+  // A CV_8UC1 matrix; throws std::invalid_argument for any other type.
+  explicit ImageView(const cv::Mat& grey);
+  cv::Mat mat() const;  // a header over the same pixels
+  bool empty() const { return width <= 0 || height <= 0; }
+};
+
+// The grey level that weighs zero when blob centroids are taken from the inverted image.
+enum class CentroidReference {
+  local_white,  // the mean grey of the marker's white region: the paper's inversion, but
+                // white paper around a blob weighs nothing, which keeps small blobs' centroids
+                // from snapping to the pixel grid
+  full_scale,   // 255, the paper's plain inversion
+};
+
+struct DetectorParams {
+  // Families searched in one pass (they share the threshold and the region tree).
+  std::vector<Family> families{Family(3), Family(4)};
+
+  // -- Binarisation: a pixel is black when darker than the mean of the M x M window
+  //    around it by more than `threshold_offset` grey levels.
+  int threshold_window = 16;  // M (paper: 16)
+  int threshold_offset = 0;   // grey levels
+
+  // -- Candidates: a white region with at least n^2 black children. Children smaller than
+  //    `noise_fraction` of the white region's area are noise; at most n^2 + max_extra_children
+  //    children remain, of which the n^2 largest are kept.
+  double noise_fraction = 1.0 / 500;
+  int max_extra_children = 3;
+
+  // -- Vertex estimation: centroids of the inverted grey image over each black region
+  //    dilated by `dilation` pixels (L-infinity).
+  int dilation = 1;  // delta (paper: 1)
+  CentroidReference centroid_reference = CentroidReference::local_white;
+
+  // -- Constraints.
+  double max_area_ratio = 5.0;  // tau1: largest / smallest blob (design ratio 16/9)
+  // tau2, scale-free: reject near-collinear blobs whose centroid scatter has a smaller
+  // to larger principal axis ratio (sqrt of the eigenvalue ratio) below this.
+  double min_spread_ratio = 0.1;
+
+  // -- Decoding: reject when the decoding error metric exceeds tau3 for the family.
+  //    0 selects the default of decode_threshold_default().
+  std::array<double, Family::kMaxN + 1> max_decode_error{};
+  // The paper's metric shrinks with the marker's size, so far markers need a scale-free
+  // bound too: every data centroid within this many units of its decoded position (the
+  // four positions are 1 u apart, so 0.5 would be a coin toss).
+  double max_cell_residual = 0.35;
+  // The squares' ink per unit of design area, largest over smallest, under the decoded
+  // homography. About 1 for a marker; taking the baseline on a wrong side of the marker
+  // makes it at least (16/9)^2 = 3.2. This is what settles the marker's turn.
+  double max_ink_spread = 2.2;
+
+  // -- Pose.
+  // Intrinsics and distortion. An empty camera (fx == 0) selects Camera::default_for(frame):
+  // decoding is unaffected; poses are then marked uncalibrated.
+  Camera camera;
+  double tag_size = 0.1;   // metres, outer edge of the black border
+  bool refine_pose = true; // iterative refinement of the final pose on all n^2 centroids
+
+  // The tau3 in force for `family`.
+  double decode_threshold(const Family& family) const;
+  // Throws std::invalid_argument naming the first parameter out of range.
+  void validate() const;
+};
+
+// tau3 defaults: the paper's 5e-4 (3x3) and 1e-3 (4x4), and calibrated values for the others.
+double decode_threshold_default(const Family& family);
+
+struct Detection {
+  Family family{3};
+  TagId id;
+  std::vector<cv::Point2d> centroids;    // n^2 blob centroids in grid order (image pixels)
+  std::array<cv::Point2d, 4> keypoints;  // K0..K3 (image pixels)
+  std::array<cv::Point2d, 4> corners;    // outer border corners from the pose, clockwise from top-left
+  cv::Point2d center;                    // marker centre from the pose (image pixels)
+  cv::Vec3d rvec, tvec;                  // marker frame -> camera frame, metres (SPEC 2)
+  double tag_size = 0;                   // the size the pose assumes
+  bool calibrated = false;               // pose from a real calibration, not the default camera
+  double decode_error = 0;               // the decoding error metric (lower is better; <= tau3)
+  double worst_cell = 0;                 // largest centroid offset from its decoded position, units
+  double ink_spread = 0;                 // ink per design area, largest / smallest square
+  double edge_score = 0;                 // mean Sobel magnitude along the inner border edge
+  double reprojection_error = 0;         // RMS of the final pose over the n^2 centroids, pixels
+};
+
+// How many candidates each stage let through, and how long each stage took, for one
+// frame or (with +=) many: the paper's false-positive funnel and timing tables.
+struct DetectionStats {
+  std::int64_t frames = 0;
+  std::int64_t regions = 0;            // regions in the tree
+  std::int64_t topology = 0;           // white regions with n^2..n^2+extra black children
+  std::int64_t area = 0;               // passed the area constraint
+  std::int64_t geometry = 0;           // passed the geometry constraint
+  std::int64_t angle = 0;              // passed the angle constraint
+  std::int64_t collinearity = 0;       // passed the collinearity constraint
+  std::int64_t decoded = 0;            // passed the residual (tau3) constraint
+  double threshold_ms = 0;             // binarisation
+  double regions_ms = 0;               // topological connected components
+  double candidates_ms = 0;            // topological filtering and vertex estimation
+  double keypoints_ms = 0;             // key points and geometric filtering
+  double hypotheses_ms = 0;            // 16 initial poses and their evaluation
+  double decode_ms = 0;                // decoding
+  double pose_ms = 0;                  // final pose
+  double total_ms() const;
+  DetectionStats& operator+=(const DetectionStats& other);
+};
+
+// What the stages saw, for debug images (see draw.hpp): filled only on request.
+struct DetectionTrace {
+  cv::Mat binary;                                     // 255 = black, as thresholded
+  std::vector<std::vector<cv::Point2d>> candidates;   // blob centroids of every topological candidate
+  std::vector<std::array<cv::Point2d, 4>> keypoints;  // K0..K3 of candidates that passed the constraints
+  std::vector<std::vector<std::vector<cv::Point2d>>> hypotheses;  // per candidate: 16 projected inner edges
+  std::vector<Detection> detections;
+};
+
+class Detector {
+ public:
+  // Throws std::invalid_argument when a parameter is out of range.
+  explicit Detector(DetectorParams params = {});
+  ~Detector();
+  Detector(Detector&&) noexcept;
+  Detector& operator=(Detector&&) noexcept;
+
+  const DetectorParams& params() const;
+
+  // Detects markers. Throws std::invalid_argument for an empty (0 x 0) image, a null
+  // pointer or a stride shorter than the width. `stats` and `trace` are filled when not null.
+  std::vector<Detection> detect(const ImageView& image, DetectionStats* stats = nullptr,
+                                DetectionTrace* trace = nullptr);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace lftag

@@ -1,0 +1,154 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// lftag detect: markers in image files, as JSON Lines (SPEC 5), one object per image.
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <stdexcept>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "commands.hpp"
+#include "json.hpp"
+#include "lftag/detector.hpp"
+#include "lftag/draw.hpp"
+
+namespace lftag::tools {
+namespace {
+
+nlohmann::json detection_json(const Detection& d) {
+  return {{"family", d.family.name()},
+          {"id", id_json(d.id)},
+          {"id_hex", d.id.to_hex()},
+          {"keypoints", points_json({d.keypoints.begin(), d.keypoints.end()})},
+          {"center", {d.center.x, d.center.y}},
+          {"corners", points_json({d.corners.begin(), d.corners.end()})},
+          {"centroids", points_json(d.centroids)},
+          {"pose", {{"rvec", vec_json(d.rvec)}, {"tvec", vec_json(d.tvec)}, {"calibrated", d.calibrated},
+                    {"tag_size", d.tag_size}}},
+          {"decode_error", d.decode_error},
+          {"worst_cell", d.worst_cell},
+          {"edge_score", d.edge_score},
+          {"reprojection_error", d.reprojection_error}};
+}
+
+nlohmann::json stats_json(const DetectionStats& s) {
+  return {{"funnel",
+           {{"regions", s.regions}, {"topology", s.topology}, {"area", s.area}, {"geometry", s.geometry},
+            {"angle", s.angle}, {"collinearity", s.collinearity}, {"decoded", s.decoded}}},
+          {"time_ms",
+           {{"threshold", s.threshold_ms}, {"regions", s.regions_ms}, {"candidates", s.candidates_ms},
+            {"keypoints", s.keypoints_ms}, {"hypotheses", s.hypotheses_ms}, {"decode", s.decode_ms},
+            {"pose", s.pose_ms}, {"total", s.total_ms()}}}};
+}
+
+}  // namespace
+
+void add_detect_command(CLI::App& app, int& status) {
+  struct Options {
+    std::vector<std::string> images;
+    std::string families = "3x3,4x4", calibration, debug_dir;
+    double fx = NAN, fy = NAN, cx = NAN, cy = NAN, tag_size = 0.1;
+    int window = 16, offset = 0;
+    bool stats = false;
+  };
+  auto opt = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand("detect", "Detect markers in images; prints one JSON object per image (JSON Lines).");
+  cmd->add_option("images", opt->images, "Image files (PNG, JPEG and every format OpenCV reads)")->required();
+  cmd->add_option("--family", opt->families, "Families to detect, comma-separated (default 3x3,4x4)");
+  cmd->add_option("--fx", opt->fx, "Focal length in pixels (x)");
+  cmd->add_option("--fy", opt->fy, "Focal length in pixels (y; default fx)");
+  cmd->add_option("--cx", opt->cx, "Principal point x (default: image centre)");
+  cmd->add_option("--cy", opt->cy, "Principal point y (default: image centre)");
+  cmd->add_option("--calibration", opt->calibration,
+                  "OpenCV calibration file (YAML/XML/JSON: camera_matrix + distortion_coefficients, or "
+                  "cameraMatrix + distCoeffs). Without a camera, poses assume fx = image width and are "
+                  "marked \"calibrated\": false");
+  cmd->add_option("--tag-size", opt->tag_size, "Outer edge of the black border in metres (default 0.1)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--threshold-window", opt->window, "Side of the mean window for binarisation (default 16)")
+      ->check(CLI::Range(2, 1024));
+  cmd->add_option("--threshold-offset", opt->offset, "Grey levels below the mean for black (default 0)")
+      ->check(CLI::Range(0, 255));
+  cmd->add_flag("--stats", opt->stats, "Add the candidate funnel and per-stage times to each object");
+  cmd->add_option("--debug-dir", opt->debug_dir,
+                  "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
+  cmd->callback([opt, &status] {
+    DetectorParams base;
+    try {
+      base.families = Family::parse_list(opt->families);
+      base.tag_size = opt->tag_size;
+      base.threshold_window = opt->window;
+      base.threshold_offset = opt->offset;
+      if (!opt->calibration.empty()) {
+        base.camera = Camera::load(opt->calibration);
+      } else if (!std::isnan(opt->fx)) {
+        base.camera = Camera::pinhole(opt->fx, std::isnan(opt->fy) ? opt->fx : opt->fy, opt->cx, opt->cy);
+      } else if (!std::isnan(opt->fy) || !std::isnan(opt->cx) || !std::isnan(opt->cy)) {
+        throw std::invalid_argument("--fy, --cx and --cy need --fx");
+      }
+      if (!opt->debug_dir.empty()) std::filesystem::create_directories(opt->debug_dir);
+      if (base.camera.fx > 0 && !std::isnan(base.camera.cx)) base.validate();
+    } catch (const std::exception& e) {
+      std::cerr << "lftag detect: " << e.what() << "\n";
+      status = 2;
+      return;
+    }
+
+    // One detector per frame size: its buffers and camera follow the size.
+    std::map<std::pair<int, int>, Detector> detectors;
+    DetectionStats total;
+    int failed = 0;
+    for (const std::string& path : opt->images) {
+      nlohmann::json out = {{"image", path}};
+      try {
+        const cv::Mat grey = cv::imread(path, cv::IMREAD_GRAYSCALE);
+        if (grey.empty()) throw std::runtime_error("cannot read the image (missing, unreadable or not an image)");
+        out["width"] = grey.cols;
+        out["height"] = grey.rows;
+        auto it = detectors.find({grey.cols, grey.rows});
+        if (it == detectors.end()) {
+          DetectorParams p = base;
+          if (p.camera.fx > 0 && std::isnan(p.camera.cx)) p.camera.cx = (grey.cols - 1) / 2.0;
+          if (p.camera.fx > 0 && std::isnan(p.camera.cy)) p.camera.cy = (grey.rows - 1) / 2.0;
+          it = detectors.emplace(std::make_pair(grey.cols, grey.rows), Detector(p)).first;
+        }
+        DetectionStats stats;
+        DetectionTrace trace;
+        const auto start = std::chrono::steady_clock::now();
+        const std::vector<Detection> found =
+            it->second.detect(ImageView(grey), &stats, opt->debug_dir.empty() ? nullptr : &trace);
+        out["time_ms"] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        out["detections"] = nlohmann::json::array();
+        for (const Detection& d : found) out["detections"].push_back(detection_json(d));
+        if (opt->stats) out["stats"] = stats_json(stats);
+        total += stats;
+        if (!opt->debug_dir.empty()) {
+          const Camera camera = it->second.params().camera.fx > 0
+                                    ? it->second.params().camera.for_frame(grey.cols, grey.rows)
+                                    : Camera::default_for(grey.cols, grey.rows);
+          const std::string stem = std::filesystem::path(path).stem().string();
+          for (const auto& [stage, image] : draw_trace(grey, trace, camera)) {
+            const std::string file = (std::filesystem::path(opt->debug_dir) / (stem + "-" + stage + ".png")).string();
+            if (!cv::imwrite(file, image)) throw std::runtime_error("cannot write debug image '" + file + "'");
+          }
+        }
+      } catch (const cv::Exception& e) {
+        out["error"] = e.err;
+      } catch (const std::exception& e) {
+        out["error"] = e.what();
+      }
+      if (out.contains("error")) ++failed;
+      std::cout << out.dump() << "\n" << std::flush;
+    }
+    if (opt->stats)
+      std::cerr << "lftag detect: " << total.frames << " images, funnel " << total.topology << " -> " << total.area
+                << " -> " << total.geometry << " -> " << total.angle << " -> " << total.collinearity << " -> "
+                << total.decoded << ", mean " << total.total_ms() / std::max<std::int64_t>(1, total.frames)
+                << " ms per image\n";
+    if (failed) std::cerr << "lftag detect: " << failed << " of " << opt->images.size() << " images failed\n";
+    status = failed ? 1 : 0;
+  });
+}
+
+}  // namespace lftag::tools
