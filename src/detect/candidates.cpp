@@ -97,10 +97,13 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
   for (int r = 1; r < int(tree.regions.size()); ++r) {
     const Region& white = tree.regions[r];
     if (white.black || white.child_count < smallest) continue;
-    // Children much smaller than the white region are noise, not blobs.
-    const double noise = white.area * params.noise_fraction;
-    kids.clear();
+    // Noise, not blobs: children much smaller than the white region (the paper's rule), or
+    // too small to pass the area constraint beside the largest child even at half its ink.
     const int* child = tree.children_of(r);
+    int largest_child = 0;
+    for (int i = 0; i < white.child_count; ++i) largest_child = std::max(largest_child, tree.regions[child[i]].area);
+    const double noise = std::max(white.area * params.noise_fraction, largest_child / (2 * params.max_area_ratio));
+    kids.clear();
     for (int i = 0; i < white.child_count; ++i)
       if (tree.regions[child[i]].area >= noise) kids.push_back(child[i]);
     if (int(kids.size()) < smallest || int(kids.size()) > largest) continue;

@@ -94,6 +94,82 @@ TEST(Cli, RenderRejectsBadInput) {
   EXPECT_NE(r.output.find("cannot write"), std::string::npos) << r.output;
 }
 
+std::vector<nlohmann::json> json_lines(const std::string& text) {
+  std::vector<nlohmann::json> out;
+  std::size_t start = 0;
+  while (start < text.size()) {
+    const std::size_t end = text.find('\n', start);
+    const std::string line = text.substr(start, end - start);
+    if (!line.empty() && line[0] == '{') out.push_back(nlohmann::json::parse(line));
+    if (end == std::string::npos) break;
+    start = end + 1;
+  }
+  return out;
+}
+
+TEST(Cli, DetectPrintsOneJsonObjectPerImageInOrder) {
+  const std::string a = kTmp + "/det_a.png", b = kTmp + "/det_b.png";
+  ASSERT_EQ(run("render --family 4x4 --id 0xabcdef --distance 2 --tilt 20 --output " + a).status, 0);
+  ASSERT_EQ(run("render --family 8x8 --id 21267647932558653966460912964485513215 --distance 2.5 --output " + b).status, 0);
+  const CliResult r = run("detect --family 3x3,4x4,8x8 --fx 320 --cx 319.5 --cy 239.5 --tag-size 1 " + a + " " + b);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto lines = json_lines(r.output);
+  ASSERT_EQ(lines.size(), 2u) << r.output;
+  EXPECT_EQ(lines[0]["image"], a);
+  EXPECT_EQ(lines[0]["width"], 640);
+  EXPECT_GT(lines[0]["time_ms"].get<double>(), 0);
+  ASSERT_EQ(lines[0]["detections"].size(), 1u);
+  const auto& d = lines[0]["detections"][0];
+  EXPECT_EQ(d["family"], "4x4");
+  EXPECT_EQ(d["id"], 0xabcdef);
+  EXPECT_EQ(d["keypoints"].size(), 4u);
+  EXPECT_EQ(d["center"].size(), 2u);
+  EXPECT_NEAR(d["pose"]["tvec"][2].get<double>(), 2.0, 0.02);  // calibrated with the render's camera
+  EXPECT_TRUE(d["pose"]["calibrated"].get<bool>());
+  ASSERT_EQ(lines[1]["detections"].size(), 1u);
+  EXPECT_EQ(lines[1]["detections"][0]["id"], "21267647932558653966460912964485513215");  // a string over 53 bits
+}
+
+TEST(Cli, DetectReportsUnreadableImagesAndGoesOn) {
+  const std::string good = kTmp + "/det_good.png", junk = kTmp + "/det_junk.png";
+  ASSERT_EQ(run("render --id 5 --output " + good).status, 0);
+  { std::ofstream(junk) << "not an image"; }
+  const CliResult r = run("detect /nonexistent.png " + junk + " " + good);
+  EXPECT_EQ(r.status, 1);
+  const auto lines = json_lines(r.output);
+  ASSERT_EQ(lines.size(), 3u) << r.output;
+  EXPECT_TRUE(lines[0].contains("error"));
+  EXPECT_TRUE(lines[1].contains("error"));
+  EXPECT_EQ(lines[2]["detections"].size(), 1u);
+  EXPECT_FALSE(lines[2]["detections"][0]["pose"]["calibrated"].get<bool>());  // the default camera
+  EXPECT_EQ(r.output.find("WARN"), std::string::npos) << r.output;
+}
+
+TEST(Cli, DetectStatsAndDebugImages) {
+  const std::string img = kTmp + "/det_stats.png", dir = kTmp + "/det_debug";
+  ASSERT_EQ(run("render --id 77 --output " + img).status, 0);
+  const CliResult r = run("detect --stats --debug-dir " + dir + " " + img);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto lines = json_lines(r.output);
+  ASSERT_EQ(lines.size(), 1u);
+  EXPECT_EQ(lines[0]["stats"]["funnel"]["decoded"], 1);
+  EXPECT_GT(lines[0]["stats"]["time_ms"]["total"].get<double>(), 0);
+  for (const char* stage : {"threshold", "candidates", "keypoints", "hypotheses", "final"})
+    EXPECT_FALSE(cv::imread(dir + "/det_stats-" + stage + ".png").empty()) << stage;
+}
+
+TEST(Cli, DetectRejectsBadConfiguration) {
+  CliResult r = run("detect --family 3x4 x.png");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.output.find("unknown family '3x4'"), std::string::npos) << r.output;
+  r = run("detect --calibration /nonexistent.yml x.png");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.output.find("/nonexistent.yml"), std::string::npos) << r.output;
+  r = run("detect --cx 100 x.png");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.output.find("need --fx"), std::string::npos) << r.output;
+}
+
 TEST(Cli, HelpDocumentsTheOptions) {
   const CliResult r = run("generate --help");
   EXPECT_EQ(r.status, 0);
@@ -101,5 +177,9 @@ TEST(Cli, HelpDocumentsTheOptions) {
     EXPECT_NE(r.output.find(opt), std::string::npos) << opt;
   const CliResult top = run("--help");
   EXPECT_NE(top.output.find("render"), std::string::npos);
+  EXPECT_NE(top.output.find("detect"), std::string::npos);
+  const CliResult detect = run("detect --help");
+  for (const char* opt : {"--family", "--fx", "--calibration", "--tag-size", "--stats", "--debug-dir"})
+    EXPECT_NE(detect.output.find(opt), std::string::npos) << opt;
   EXPECT_NE(run("").status, 0);
 }

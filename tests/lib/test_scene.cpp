@@ -4,21 +4,12 @@
 #include <opencv2/imgproc.hpp>
 
 #include "lftag/render.hpp"
+#include "scenes.hpp"
 
 using namespace lftag;
+using lftag::test::rotation;
 
 namespace {
-
-cv::Vec3d rotation(double roll, double tilt, double pan) {
-  const double d = CV_PI / 180;
-  cv::Matx33d rz, rx, ry;
-  cv::Rodrigues(cv::Vec3d(0, 0, roll * d), rz);
-  cv::Rodrigues(cv::Vec3d(tilt * d, 0, 0), rx);
-  cv::Rodrigues(cv::Vec3d(0, pan * d, 0), ry);
-  cv::Vec3d r;
-  cv::Rodrigues(ry * rx * rz, r);
-  return r;
-}
 
 // Darkness-weighted centroid of square g, over its projected footprint grown by 1 u.
 cv::Point2d measured_centre(const cv::Mat1f& image, float white, const Camera& cam, const SceneMarker& m, int g) {

@@ -56,8 +56,9 @@ struct DetectorParams {
   int threshold_offset = 0;   // grey levels
 
   // -- Candidates: a white region with at least n^2 black children. Children smaller than
-  //    `noise_fraction` of the white region's area are noise; at most n^2 + max_extra_children
-  //    children remain, of which the n^2 largest are kept.
+  //    `noise_fraction` of the white region's area, or than the largest child over
+  //    2 max_area_ratio, are noise; at most n^2 + max_extra_children children remain, of
+  //    which the n^2 largest are kept.
   double noise_fraction = 1.0 / 500;
   int max_extra_children = 3;
 
@@ -80,9 +81,10 @@ struct DetectorParams {
   // four positions are 1 u apart, so 0.5 would be a coin toss).
   double max_cell_residual = 0.35;
   // The squares' ink per unit of design area, largest over smallest, under the decoded
-  // homography. About 1 for a marker; taking the baseline on a wrong side of the marker
-  // makes it at least (16/9)^2 = 3.2. This is what settles the marker's turn.
-  double max_ink_spread = 2.2;
+  // homography: at most 1.24 for true markers in our renders, from 3 m to the range limit,
+  // tilted or blurred; 16/9 when one square has the wrong size, and at least
+  // (16/9)^2 = 3.2 when the baseline is taken on a wrong side. This settles the turn.
+  double max_ink_spread = 1.5;
 
   // -- Pose.
   // Intrinsics and distortion. An empty camera (fx == 0) selects Camera::default_for(frame):

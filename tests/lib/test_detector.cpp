@@ -1,0 +1,417 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// The whole detector on rendered scenes: every family over many poses, the paper's range
+// set-up, pose accuracy, several markers, photo backgrounds, rejections and odd frames.
+#include <random>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "lftag/detector.hpp"
+#include "lftag/render.hpp"
+#include "scenes.hpp"
+
+using namespace lftag;
+using lftag::test::paper_camera;
+using lftag::test::random_id;
+using lftag::test::rotation;
+using lftag::test::rotation_error_deg;
+
+namespace {
+
+const std::string kPhotos = "/usr/share/doc/opencv-doc/examples/data/";
+
+struct Outcome {
+  int right = 0, wrong = 0, missed = 0;
+};
+
+// Detects in `scene` and compares with its truth: every truth marker must be found with
+// its id, and nothing else may be found.
+void score(Detector& detector, const RenderedScene& scene, Outcome& o) {
+  const std::vector<Detection> found = detector.detect(ImageView(scene.image));
+  std::vector<bool> used(found.size());
+  for (const MarkerTruth& t : scene.truth) {
+    bool hit = false;
+    for (std::size_t i = 0; i < found.size(); ++i)
+      if (!used[i] && found[i].family == t.family && found[i].id == t.id) used[i] = hit = true;
+    hit ? ++o.right : ++o.missed;
+  }
+  for (bool u : used) o.wrong += !u;
+}
+
+DetectorParams all_families() {
+  DetectorParams p;
+  p.families = Family::all();
+  return p;
+}
+
+}  // namespace
+
+TEST(Detector, EveryFamilyDecodesOverManyPoses) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Detector detector(all_families());
+  for (const Family& f : Family::all()) {
+    Outcome o;
+    for (int trial = 0; trial < 24; ++trial) {
+      SceneParams p;
+      p.camera = Camera::pinhole(600, 600, 319.5, 239.5, 640, 480);
+      if (trial % 3 == 1) p.blur_length_px = 3, p.blur_angle_deg = 180 * u(rng);
+      if (trial % 3 == 2) p.noise_sigma = 4, p.seed = trial;
+      SceneMarker m;
+      m.family = f;
+      m.id = trial == 0 ? TagId(0) : trial == 1 ? f.max_id() : random_id(f, rng);
+      m.tag_size = 0.2;
+      // 2.5 to 6 pixels per unit (3x3: 60 to 144 px across; 8x8: 135 to 324 px), tilted up
+      // to 57 degrees, anywhere near the centre.
+      const double px_per_unit = 2.5 + 3.5 * (0.5 + 0.5 * u(rng));
+      const double distance = 0.2 * 600 / (px_per_unit * f.side());
+      m.tvec = {0.1 * distance * u(rng), 0.1 * distance * u(rng), distance};
+      m.rvec = rotation(180 * u(rng), 45 * u(rng), 35 * u(rng));
+      const int missed = o.missed;
+      score(detector, render_scene(p, {m}), o);
+      if (o.missed > missed)
+        std::cout << f.name() << " missed: trial " << trial << " distance " << m.tvec[2] << " rvec " << m.rvec
+                  << " blur " << p.blur_length_px << " noise " << p.noise_sigma << "\n";
+    }
+    EXPECT_EQ(o.right, 24) << f.name();
+    EXPECT_EQ(o.wrong, 0) << f.name();
+  }
+}
+
+TEST(Detector, PaperSetUp3x3At20Metres4x4At16Metres) {
+  // 640x480, f = 320, 1 m markers: 16 px (3x3) and 20 px (4x4) across.
+  for (const auto& [n, distance] : {std::pair{3, 20.0}, std::pair{4, 16.0}}) {
+    std::mt19937_64 rng(n);
+    std::uniform_real_distribution<double> u(-1, 1);
+    DetectorParams params;
+    params.families = {Family(n)};
+    Detector detector(params);
+    Outcome o;
+    for (int trial = 0; trial < 30; ++trial) {
+      SceneParams p;
+      p.camera = paper_camera();
+      p.supersample = 16;
+      SceneMarker m;
+      m.family = Family(n);
+      m.id = random_id(m.family, rng);
+      m.tvec = {0.05 * u(rng), 0.05 * u(rng), distance};  // sub-pixel offsets
+      m.rvec = rotation(180 * u(rng), 0, 0);
+      score(detector, render_scene(p, {m}), o);
+    }
+    EXPECT_EQ(o.right, 30) << n << "x" << n << " at " << distance << " m";
+    EXPECT_EQ(o.wrong, 0);
+  }
+}
+
+TEST(Detector, PoseWithinOneDegreeAndOnePercent) {
+  // A 100 px marker at moderate tilt, without and with lens distortion.
+  for (bool distorted : {false, true}) {
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (int trial = 0; trial < 10; ++trial) {
+      SceneParams p;
+      p.camera = Camera::pinhole(500, 500, 319.5, 239.5, 640, 480);
+      if (distorted) p.camera.distortion = {-0.25, 0.08, 0.001, -0.001, 0};
+      p.supersample = 16;
+      p.noise_sigma = 1;
+      SceneMarker m;
+      m.family = Family(4);
+      m.id = random_id(m.family, rng);
+      m.tag_size = 0.2;
+      m.tvec = {0.1 * u(rng), 0.1 * u(rng), 1.0};
+      m.rvec = rotation(180 * u(rng), 30 + 10 * u(rng), 15 * u(rng));
+      const RenderedScene scene = render_scene(p, {m});
+      DetectorParams params;
+      params.camera = p.camera;
+      params.tag_size = m.tag_size;
+      Detector detector(params);
+      const auto found = detector.detect(ImageView(scene.image));
+      ASSERT_EQ(found.size(), 1u) << "distorted " << distorted << " trial " << trial;
+      const Detection& d = found[0];
+      EXPECT_TRUE(d.calibrated);
+      EXPECT_LT(rotation_error_deg(d.rvec, m.rvec), 1.0);
+      EXPECT_LT(cv::norm(d.tvec - m.tvec), 0.01 * cv::norm(m.tvec));
+      for (int i = 0; i < 4; ++i) EXPECT_LT(cv::norm(d.corners[i] - scene.truth[0].corners[i]), 1.0);
+    }
+  }
+}
+
+TEST(Detector, UncalibratedPosesAreMarkedAndStillDecode) {
+  SceneParams p;
+  p.camera = Camera::pinhole(900, 900, 639.5, 359.5, 1280, 720);
+  SceneMarker m;
+  m.id = 1234;
+  m.tag_size = 0.15;
+  m.tvec = {0.05, 0.02, 1.2};
+  m.rvec = rotation(20, 30, 0);
+  const RenderedScene scene = render_scene(p, {m});
+  Detector detector;  // no camera: the default for the frame (fx = width)
+  const auto found = detector.detect(ImageView(scene.image));
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_EQ(found[0].id, TagId(1234));
+  EXPECT_FALSE(found[0].calibrated);
+  EXPECT_GT(found[0].tvec[2], 0);
+  // Even with the wrong focal length the pose reprojects onto the observed blobs.
+  EXPECT_LT(found[0].reprojection_error, 0.5);
+}
+
+TEST(Detector, SeveralMarkersInOneFrame) {
+  SceneParams p;
+  p.camera = Camera::pinhole(1000, 1000, 639.5, 359.5, 1280, 720);
+  p.light_gradient = 0.6;
+  std::vector<SceneMarker> markers;
+  std::mt19937_64 rng(3);
+  const double xs[] = {-0.55, -0.2, 0.15, 0.5};
+  for (int i = 0; i < 8; ++i) {
+    SceneMarker m;
+    m.family = Family(3 + i % 3);
+    m.id = random_id(m.family, rng);
+    m.tag_size = 0.15;
+    m.tvec = {xs[i % 4], i < 4 ? -0.17 : 0.17, 1.6 + 0.1 * i};
+    m.rvec = rotation(40.0 * i, 20, -10);
+    markers.push_back(m);
+  }
+  DetectorParams params;
+  params.families = {Family(3), Family(4), Family(5)};
+  Detector detector(params);
+  Outcome o;
+  score(detector, render_scene(p, markers), o);
+  EXPECT_EQ(o.right, 8);
+  EXPECT_EQ(o.wrong, 0);
+}
+
+TEST(Detector, MarkersOnPhotoBackgrounds) {
+  std::mt19937_64 rng(8);
+  std::uniform_real_distribution<double> u(-1, 1);
+  Detector detector(all_families());
+  Outcome o;
+  for (const char* name : {"building.jpg", "baboon.jpg", "fruits.jpg", "board.jpg", "starry_night.jpg", "left01.jpg"}) {
+    SceneParams p;
+    p.camera = Camera::pinhole(800, 800, 639.5, 359.5, 1280, 720);
+    p.photo = cv::imread(kPhotos + name, cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(p.photo.empty()) << name;
+    p.light_gradient = 0.5 * u(rng);
+    p.noise_sigma = 2;
+    std::vector<SceneMarker> markers;
+    for (int i = 0; i < 3; ++i) {
+      SceneMarker m;
+      m.family = Family(3 + i);
+      m.id = random_id(m.family, rng);
+      m.tag_size = 0.2;
+      m.tvec = {-0.5 + 0.5 * i, 0.15 * u(rng), 1.5 + 0.3 * u(rng)};
+      m.rvec = rotation(180 * u(rng), 30 * u(rng), 30 * u(rng));
+      markers.push_back(m);
+    }
+    score(detector, render_scene(p, markers), o);
+  }
+  EXPECT_EQ(o.right, 18);
+  EXPECT_EQ(o.wrong, 0);
+}
+
+TEST(Detector, RejectsAMarkerCutByTheImageEdge) {
+  Detector detector(all_families());
+  for (double x : {-0.62, 0.6}) {  // the border crosses the left or the right edge
+    SceneParams p;
+    p.camera = Camera::pinhole(500, 500, 319.5, 239.5, 640, 480);
+    p.background = 0.9;
+    SceneMarker m;
+    m.id = 4321;
+    m.tag_size = 0.3;
+    m.tvec = {x, 0, 1.0};
+    const RenderedScene scene = render_scene(p, {m});
+    ASSERT_FALSE(scene.truth[0].fully_visible);
+    EXPECT_TRUE(detector.detect(ImageView(scene.image)).empty()) << x;
+  }
+}
+
+TEST(Detector, RejectsOccludedMarkers) {
+  SceneParams p;
+  p.camera = Camera::pinhole(500, 500, 319.5, 239.5, 640, 480);
+  SceneMarker m;
+  m.family = Family(4);
+  m.id = 98765;
+  m.tag_size = 0.3;
+  m.tvec = {0, 0, 1.0};
+  m.rvec = rotation(15, 20, 0);
+  const RenderedScene scene = render_scene(p, {m});
+  Detector detector(all_families());
+  ASSERT_EQ(detector.detect(ImageView(scene.image)).size(), 1u);
+  const double blob = scene.truth[0].edge_px / m.family.side() * 2.5;  // covers a square
+  for (int g : {5, 0, 15}) {  // a data square, a baseline square, the K3 corner
+    cv::Mat1b covered = scene.image.clone();
+    cv::circle(covered, scene.truth[0].centers[g], int(blob), 230, cv::FILLED);
+    EXPECT_TRUE(detector.detect(ImageView(covered)).empty()) << "square " << g << " covered";
+  }
+  // A dark object across the border and a square.
+  cv::Mat1b bar = scene.image.clone();
+  cv::line(bar, scene.truth[0].corners[0] + cv::Point2d(-20, 40), scene.truth[0].centers[4], 0, int(blob));
+  EXPECT_TRUE(detector.detect(ImageView(bar)).empty());
+}
+
+TEST(Detector, RejectsPatternsWithTheWrongStructure) {
+  SceneParams p;
+  p.camera = Camera::pinhole(500, 500, 319.5, 239.5, 640, 480);
+  const Family f(3);
+  SceneMarker m;
+  m.family = f;
+  m.id = 6789;
+  m.tag_size = 0.3;
+  m.tvec = {0, 0, 1.0};
+  m.rvec = rotation(25, 15, 10);
+  const SceneTarget good = to_target(m);
+  Detector detector(all_families());
+  ASSERT_EQ(SceneRenderer(p).render({good}).empty(), false);
+  ASSERT_EQ(detector.detect(ImageView(SceneRenderer(p).render({good}))).size(), 1u);
+
+  auto rejected = [&](const cv::Mat1f& albedo, const char* what) {
+    SceneTarget t = good;
+    t.albedo = albedo;
+    EXPECT_TRUE(detector.detect(ImageView(SceneRenderer(p).render({t}))).empty()) << what;
+  };
+  // (A mirror image is no test: it is another valid marker.)
+  const int margin = 2;
+  auto place = [&](cv::Mat1f& a, const UnitRect& from, const UnitRect& to) {
+    a(cv::Rect(int(from.x) + margin, int(from.y) + margin, int(from.width), int(from.height))).setTo(m.white);
+    a(cv::Rect(int(to.x) + margin, int(to.y) + margin, int(to.width), int(to.height))).setTo(m.black);
+  };
+  // The baseline on a diagonal: the top-right baseline square swapped with the bottom-right
+  // data square's size.
+  cv::Mat1f diagonal = good.albedo.clone();
+  place(diagonal, f.square(2, 0), UnitRect{16, 5, 3, 3});
+  place(diagonal, f.square(8, m.id.digit(6)), UnitRect{16, 16, 4, 4});
+  rejected(diagonal, "baseline on a diagonal");
+  // One data square as large as a baseline square, at a valid position.
+  cv::Mat1f big = good.albedo.clone();
+  const UnitRect s5 = f.square(5, m.id.digit(3));
+  place(big, s5, UnitRect{s5.x, s5.y, 4, 4});
+  rejected(big, "a data square of baseline size");
+  // A data square at the centre of its cell, between its four positions.
+  cv::Mat1f centred = good.albedo.clone();
+  const UnitRect s4 = f.square(4, m.id.digit(2));
+  centred(cv::Rect(int(s4.x) + margin, int(s4.y) + margin, 3, 3)).setTo(m.white);
+  cv::Mat1f fine;
+  cv::resize(centred, fine, {}, 2, 2, cv::INTER_NEAREST);  // half units
+  fine(cv::Rect(2 * (10 + margin) + 1, 2 * (10 + margin) + 1, 6, 6)).setTo(m.black);
+  SceneTarget half = good;
+  half.albedo = fine;
+  half.cell_size /= 2;
+  EXPECT_TRUE(detector.detect(ImageView(SceneRenderer(p).render({half}))).empty()) << "square between positions";
+  // No baseline: the baseline squares shrunk to data size.
+  cv::Mat1f even = good.albedo.clone();
+  for (int g : {0, 2}) {
+    const UnitRect s = f.square(g, 0);
+    even(cv::Rect(int(s.x) + margin, int(s.y) + margin, 4, 4)).setTo(m.white);
+    even(cv::Rect(int(s.x) + margin, int(s.y) + margin, 3, 3)).setTo(m.black);
+  }
+  rejected(even, "no baseline");
+  // Nine squares off the grid.
+  cv::Mat1f scattered(28, 28, m.white);
+  scattered(cv::Rect(2, 2, 24, 24)).setTo(m.black);
+  scattered(cv::Rect(4, 4, 20, 20)).setTo(m.white);
+  const cv::Point spots[] = {{6, 6}, {12, 7}, {19, 6}, {7, 11}, {15, 13}, {19, 12}, {6, 18}, {11, 17}, {18, 19}};
+  for (const cv::Point& s : spots) scattered(cv::Rect(s.x, s.y, 3, 3)).setTo(m.black);
+  scattered(cv::Rect(6, 6, 4, 4)).setTo(m.black);
+  scattered(cv::Rect(19, 6, 4, 4)).setTo(m.black);
+  rejected(scattered, "off the grid");
+}
+
+TEST(Detector, DegenerateFrames) {
+  Detector detector(all_families());
+  EXPECT_THROW(detector.detect(ImageView(cv::Mat1b())), std::invalid_argument);
+  EXPECT_THROW(detector.detect(ImageView(nullptr, 4, 4, 4)), std::invalid_argument);
+  std::vector<std::uint8_t> pixels(64, 100);
+  EXPECT_THROW(detector.detect(ImageView(pixels.data(), 8, 8, 4)), std::invalid_argument);  // stride < width
+  EXPECT_THROW(ImageView(cv::Mat3b(4, 4)), std::invalid_argument);
+  for (const cv::Size size : {cv::Size(1, 1), cv::Size(3, 2), cv::Size(2, 3), cv::Size(17, 13)}) {
+    for (int level : {0, 255}) EXPECT_TRUE(detector.detect(ImageView(cv::Mat1b(size, uchar(level)))).empty());
+  }
+  for (int level : {0, 128, 255}) EXPECT_TRUE(detector.detect(ImageView(cv::Mat1b(480, 640, uchar(level)))).empty());
+  cv::Mat1b noise(720, 1280);
+  cv::RNG(7).fill(noise, cv::RNG::UNIFORM, 0, 256);
+  EXPECT_TRUE(detector.detect(ImageView(noise)).empty());
+}
+
+TEST(Detector, An8KFrameAndAPaddedStride) {
+  SceneParams p;
+  p.camera = Camera::pinhole(6000, 6000, 3839.5, 2159.5, 7680, 4320);
+  SceneMarker m;
+  m.family = Family(5);
+  m.id = TagId::parse("12345678901234");
+  m.tag_size = 0.1;
+  m.tvec = {0.3, 0.1, 2.0};
+  m.rvec = rotation(10, 20, 0);
+  const RenderedScene scene = render_scene(p, {m});
+  Detector detector(all_families());
+  auto found = detector.detect(ImageView(scene.image));
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_EQ(found[0].id, m.id);
+
+  // The same frame inside a wider buffer: a view with a padded stride.
+  SceneParams small = p;
+  small.camera = Camera::pinhole(500, 500, 319.5, 239.5, 641, 479);
+  m.tvec = {0, 0, 1.0};
+  const RenderedScene s2 = render_scene(small, {m});
+  cv::Mat1b wide(479, 700, uchar(77));
+  s2.image.copyTo(wide(cv::Rect(0, 0, 641, 479)));
+  found = detector.detect(ImageView(wide.data, 641, 479, wide.step));
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_EQ(found[0].id, m.id);
+  const auto plain = detector.detect(ImageView(s2.image));
+  ASSERT_EQ(plain.size(), 1u);
+  EXPECT_EQ(plain[0].centroids, found[0].centroids);
+}
+
+TEST(Detector, StatsCountTheFunnelAndTraceRecordsTheStages) {
+  SceneParams p;
+  p.camera = Camera::pinhole(500, 500, 319.5, 239.5, 640, 480);
+  p.photo = cv::imread(kPhotos + "building.jpg", cv::IMREAD_GRAYSCALE);
+  SceneMarker m;
+  m.id = 77;
+  m.tag_size = 0.2;
+  m.tvec = {0, 0, 1.5};
+  Detector detector;
+  DetectionStats stats;
+  DetectionTrace trace;
+  const auto found = detector.detect(ImageView(render_scene(p, {m}).image), &stats, &trace);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_EQ(stats.frames, 1);
+  EXPECT_GT(stats.regions, 100);
+  EXPECT_GE(stats.topology, stats.area);
+  EXPECT_GE(stats.area, stats.geometry);
+  EXPECT_GE(stats.geometry, stats.angle);
+  EXPECT_GE(stats.angle, stats.collinearity);
+  EXPECT_GE(stats.collinearity, stats.decoded);
+  EXPECT_EQ(stats.decoded, 1);
+  EXPECT_GT(stats.total_ms(), 0);
+  EXPECT_EQ(trace.binary.size(), cv::Size(640, 480));
+  EXPECT_EQ(int(trace.candidates.size()), int(stats.area));
+  ASSERT_FALSE(trace.hypotheses.empty());
+  EXPECT_EQ(trace.hypotheses[0].size(), 16u);
+  EXPECT_EQ(trace.detections.size(), 1u);
+  DetectionStats sum;
+  sum += stats;
+  sum += stats;
+  EXPECT_EQ(sum.decoded, 2);
+  EXPECT_DOUBLE_EQ(sum.total_ms(), 2 * stats.total_ms());
+}
+
+TEST(Detector, ParametersAreValidated) {
+  auto invalid = [](auto change) {
+    DetectorParams p;
+    change(p);
+    EXPECT_THROW(Detector{p}, std::invalid_argument);
+  };
+  invalid([](DetectorParams& p) { p.families.clear(); });
+  invalid([](DetectorParams& p) { p.threshold_window = 1; });
+  invalid([](DetectorParams& p) { p.threshold_offset = 300; });
+  invalid([](DetectorParams& p) { p.max_area_ratio = 0.5; });
+  invalid([](DetectorParams& p) { p.max_decode_error[3] = -1; });
+  invalid([](DetectorParams& p) { p.tag_size = 0; });
+  invalid([](DetectorParams& p) { p.camera = Camera::pinhole(-5, 5, 1, 1); });
+  DetectorParams p;
+  EXPECT_DOUBLE_EQ(p.decode_threshold(Family(3)), 5e-4);
+  EXPECT_DOUBLE_EQ(p.decode_threshold(Family(4)), 1e-3);
+  p.max_decode_error[4] = 2e-3;
+  EXPECT_DOUBLE_EQ(p.decode_threshold(Family(4)), 2e-3);
+}
