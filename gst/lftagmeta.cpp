@@ -1,0 +1,343 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+#include "lftagmeta.h"
+
+#include <algorithm>
+#include <array>
+#include <iterator>
+#include <stdexcept>
+#include <string>
+
+namespace lftag::gst {
+namespace {
+
+const GstMetaInfo* register_custom(const char* name) {
+  // Tests link this code and also load the plugin that holds another copy of it.
+  if (const GstMetaInfo* info = gst_meta_get_info(name)) return info;
+  // No tags: every element that copies metadata (basetransform, videoconvert,
+  // videoscale, encoders) keeps a tag-less meta as it is.
+  const gchar* no_tags[] = {nullptr};
+  return gst_meta_register_custom(name, no_tags, nullptr, nullptr, nullptr);
+}
+
+// ---- writing
+
+void append_double(GValue* array, double x) {
+  GValue v = G_VALUE_INIT;
+  g_value_init(&v, G_TYPE_DOUBLE);
+  g_value_set_double(&v, x);
+  gst_value_array_append_and_take_value(array, &v);
+}
+
+void point_value(GValue* out, cv::Point2d p) {
+  gst_value_array_init(out, 2);
+  append_double(out, p.x);
+  append_double(out, p.y);
+}
+
+void set_point(GstStructure* s, const char* field, cv::Point2d p) {
+  GValue v = G_VALUE_INIT;
+  point_value(&v, p);
+  gst_structure_take_value(s, field, &v);
+}
+
+template <class Points>
+void set_points(GstStructure* s, const char* field, const Points& points) {
+  GValue list = G_VALUE_INIT;
+  gst_value_array_init(&list, guint(points.size()));
+  for (const cv::Point2d& p : points) {
+    GValue v = G_VALUE_INIT;
+    point_value(&v, p);
+    gst_value_array_append_and_take_value(&list, &v);
+  }
+  gst_structure_take_value(s, field, &list);
+}
+
+template <class Doubles>
+void set_doubles(GstStructure* s, const char* field, const Doubles& values) {
+  GValue list = G_VALUE_INIT;
+  gst_value_array_init(&list, guint(std::size(values)));
+  for (double x : values) append_double(&list, x);
+  gst_structure_take_value(s, field, &list);
+}
+
+void set_vec3(GstStructure* s, const char* field, const cv::Vec3d& v) {
+  set_doubles(s, field, std::vector<double>{v[0], v[1], v[2]});
+}
+
+void set_structures(GstStructure* s, const char* field, const std::vector<GstStructure*>& items) {
+  GValue list = G_VALUE_INIT;
+  gst_value_array_init(&list, guint(items.size()));
+  for (GstStructure* item : items) {
+    GValue v = G_VALUE_INIT;
+    g_value_init(&v, GST_TYPE_STRUCTURE);
+    g_value_take_boxed(&v, item);
+    gst_value_array_append_and_take_value(&list, &v);
+  }
+  gst_structure_take_value(s, field, &list);
+}
+
+void set_identity(GstStructure* s, const Family& family, TagId id) {
+  gst_structure_set(s, LFTAG_FIELD_FAMILY, G_TYPE_STRING, family.name().c_str(), nullptr);
+  if (id.fits_u64()) gst_structure_set(s, LFTAG_FIELD_ID, G_TYPE_UINT64, guint64(id.low()), nullptr);
+  gst_structure_set(s, LFTAG_FIELD_ID_STRING, G_TYPE_STRING, id.to_decimal().c_str(), nullptr);
+}
+
+// ---- reading
+
+[[noreturn]] void malformed(const GstStructure* s, const char* field, const char* expected) {
+  throw std::invalid_argument(std::string(gst_structure_get_name(s)) + ": field '" + field + "' " + expected);
+}
+
+const GValue* value_of(const GstStructure* s, const char* field) {
+  const GValue* v = gst_structure_get_value(s, field);
+  if (!v) malformed(s, field, "is missing");
+  return v;
+}
+
+std::vector<double> doubles_of(const GValue* v) {
+  std::vector<double> out;
+  if (!GST_VALUE_HOLDS_ARRAY(v)) return out;
+  for (guint i = 0; i < gst_value_array_get_size(v); ++i) {
+    const GValue* x = gst_value_array_get_value(v, i);
+    if (!G_VALUE_HOLDS_DOUBLE(x)) return {};
+    out.push_back(g_value_get_double(x));
+  }
+  return out;
+}
+
+std::vector<double> get_doubles(const GstStructure* s, const char* field, std::size_t count) {
+  std::vector<double> d = doubles_of(value_of(s, field));
+  if (d.size() != count)
+    malformed(s, field, ("is not an array of " + std::to_string(count) + " doubles").c_str());
+  return d;
+}
+
+cv::Point2d get_point(const GstStructure* s, const char* field) {
+  const std::vector<double> d = get_doubles(s, field, 2);
+  return {d[0], d[1]};
+}
+
+std::vector<cv::Point2d> get_points(const GstStructure* s, const char* field) {
+  const GValue* v = value_of(s, field);
+  if (!GST_VALUE_HOLDS_ARRAY(v)) malformed(s, field, "is not an array of points");
+  std::vector<cv::Point2d> points;
+  for (guint i = 0; i < gst_value_array_get_size(v); ++i) {
+    const std::vector<double> d = doubles_of(gst_value_array_get_value(v, i));
+    if (d.size() != 2) malformed(s, field, "is not an array of points");
+    points.emplace_back(d[0], d[1]);
+  }
+  return points;
+}
+
+template <std::size_t N>
+std::array<cv::Point2d, N> get_point_array(const GstStructure* s, const char* field) {
+  const std::vector<cv::Point2d> points = get_points(s, field);
+  if (points.size() != N) malformed(s, field, ("does not hold " + std::to_string(N) + " points").c_str());
+  std::array<cv::Point2d, N> out;
+  std::copy(points.begin(), points.end(), out.begin());
+  return out;
+}
+
+cv::Vec3d get_vec3(const GstStructure* s, const char* field) {
+  const std::vector<double> d = get_doubles(s, field, 3);
+  return {d[0], d[1], d[2]};
+}
+
+double get_double(const GstStructure* s, const char* field) {
+  double x;
+  if (!gst_structure_get_double(s, field, &x)) malformed(s, field, "is not a double");
+  return x;
+}
+
+bool get_boolean(const GstStructure* s, const char* field) {
+  gboolean b;
+  if (!gst_structure_get_boolean(s, field, &b)) malformed(s, field, "is not a boolean");
+  return b;
+}
+
+int get_int(const GstStructure* s, const char* field) {
+  gint i;
+  if (!gst_structure_get_int(s, field, &i)) malformed(s, field, "is not an integer");
+  return i;
+}
+
+std::string get_string(const GstStructure* s, const char* field) {
+  const gchar* text = gst_structure_get_string(s, field);
+  if (!text) malformed(s, field, "is not a string");
+  return text;
+}
+
+Family get_family(const GstStructure* s) {
+  try {
+    return Family::parse(get_string(s, LFTAG_FIELD_FAMILY));
+  } catch (const std::invalid_argument&) {
+    malformed(s, LFTAG_FIELD_FAMILY, "does not name a family");
+  }
+}
+
+TagId get_id(const GstStructure* s) {
+  TagId id;
+  try {
+    id = TagId::parse(get_string(s, LFTAG_FIELD_ID_STRING));
+  } catch (const std::invalid_argument&) {
+    malformed(s, LFTAG_FIELD_ID_STRING, "is not a decimal id");
+  }
+  guint64 low;
+  const bool has_u64 = gst_structure_get_uint64(s, LFTAG_FIELD_ID, &low);
+  if (has_u64 != id.fits_u64() || (has_u64 && low != id.low()))
+    malformed(s, LFTAG_FIELD_ID, "disagrees with id-string");
+  return id;
+}
+
+const GstStructure* meta_structure(GstBuffer* buffer, const char* name) {
+  GstCustomMeta* meta = gst_buffer_get_custom_meta(buffer, name);
+  return meta ? gst_custom_meta_get_structure(meta) : nullptr;
+}
+
+template <class Read>
+auto read_list(const GstStructure* s, const char* field, const char* item_name, Read read) {
+  const GValue* v = value_of(s, field);
+  if (!GST_VALUE_HOLDS_ARRAY(v)) malformed(s, field, "is not an array");
+  std::vector<decltype(read(s))> out;
+  for (guint i = 0; i < gst_value_array_get_size(v); ++i) {
+    const GValue* item = gst_value_array_get_value(v, i);
+    if (!GST_VALUE_HOLDS_STRUCTURE(item) || !gst_structure_has_name(gst_value_get_structure(item), item_name))
+      malformed(s, field, ("holds something other than " + std::string(item_name) + " structures").c_str());
+    out.push_back(read(gst_value_get_structure(item)));
+  }
+  return out;
+}
+
+}  // namespace
+
+const GstMetaInfo* detection_meta_info() {
+  static const GstMetaInfo* info = register_custom(LFTAG_META_NAME);
+  return info;
+}
+
+const GstMetaInfo* truth_meta_info() {
+  static const GstMetaInfo* info = register_custom(LFTAG_TRUTH_META_NAME);
+  return info;
+}
+
+GstStructure* detection_structure(const Detection& d) {
+  GstStructure* s = gst_structure_new_empty(LFTAG_DETECTION_STRUCTURE_NAME);
+  set_identity(s, d.family, d.id);
+  set_points(s, LFTAG_FIELD_KEYPOINTS, d.keypoints);
+  set_points(s, LFTAG_FIELD_CENTROIDS, d.centroids);
+  set_points(s, LFTAG_FIELD_CORNERS, d.corners);
+  set_point(s, LFTAG_FIELD_CENTER, d.center);
+  set_vec3(s, LFTAG_FIELD_RVEC, d.rvec);
+  set_vec3(s, LFTAG_FIELD_TVEC, d.tvec);
+  gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, d.tag_size,
+                    LFTAG_FIELD_CALIBRATED, G_TYPE_BOOLEAN, gboolean(d.calibrated),
+                    LFTAG_FIELD_DECODE_ERROR, G_TYPE_DOUBLE, d.decode_error,
+                    LFTAG_FIELD_EDGE_SCORE, G_TYPE_DOUBLE, d.edge_score,
+                    LFTAG_FIELD_REPROJECTION_ERROR, G_TYPE_DOUBLE, d.reprojection_error, nullptr);
+  return s;
+}
+
+GstStructure* truth_structure(const MarkerTruth& t, const Camera& camera) {
+  GstStructure* s = gst_structure_new_empty(LFTAG_TRUTH_STRUCTURE_NAME);
+  set_identity(s, t.family, t.id);
+  set_points(s, LFTAG_FIELD_KEYPOINTS, t.keypoints);
+  set_points(s, LFTAG_FIELD_CENTROIDS, t.centroids);
+  set_points(s, LFTAG_FIELD_CORNERS, t.corners);
+  set_point(s, LFTAG_FIELD_CENTER, camera.project({cv::Point3d(0, 0, 0)}, t.rvec, t.tvec)[0]);
+  set_vec3(s, LFTAG_FIELD_RVEC, t.rvec);
+  set_vec3(s, LFTAG_FIELD_TVEC, t.tvec);
+  set_points(s, LFTAG_FIELD_CENTERS, t.centers);
+  gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, t.tag_size,
+                    LFTAG_FIELD_FULLY_VISIBLE, G_TYPE_BOOLEAN, gboolean(t.fully_visible),
+                    LFTAG_FIELD_EDGE_PX, G_TYPE_DOUBLE, t.edge_px, nullptr);
+  return s;
+}
+
+void set_detections(GstStructure* s, const char* field, const std::vector<Detection>& detections) {
+  std::vector<GstStructure*> items;
+  for (const Detection& d : detections) items.push_back(detection_structure(d));
+  set_structures(s, field, items);
+}
+
+void add_detection_meta(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections) {
+  detection_meta_info();
+  GstStructure* s = gst_custom_meta_get_structure(gst_buffer_add_custom_meta(buffer, LFTAG_META_NAME));
+  gst_structure_set(s, LFTAG_META_FIELD_WIDTH, G_TYPE_INT, width, LFTAG_META_FIELD_HEIGHT, G_TYPE_INT, height,
+                    nullptr);
+  set_detections(s, LFTAG_META_FIELD_DETECTIONS, detections);
+}
+
+void add_truth_meta(GstBuffer* buffer, const Camera& camera, const std::vector<MarkerTruth>& markers) {
+  truth_meta_info();
+  GstStructure* s = gst_custom_meta_get_structure(gst_buffer_add_custom_meta(buffer, LFTAG_TRUTH_META_NAME));
+  gst_structure_set(s, LFTAG_META_FIELD_WIDTH, G_TYPE_INT, camera.width, LFTAG_META_FIELD_HEIGHT, G_TYPE_INT,
+                    camera.height, LFTAG_META_FIELD_FX, G_TYPE_DOUBLE, camera.fx, LFTAG_META_FIELD_FY,
+                    G_TYPE_DOUBLE, camera.fy, LFTAG_META_FIELD_CX, G_TYPE_DOUBLE, camera.cx, LFTAG_META_FIELD_CY,
+                    G_TYPE_DOUBLE, camera.cy, nullptr);
+  set_doubles(s, LFTAG_META_FIELD_DISTORTION, camera.distortion);
+  std::vector<GstStructure*> items;
+  for (const MarkerTruth& t : markers) items.push_back(truth_structure(t, camera));
+  set_structures(s, LFTAG_META_FIELD_MARKERS, items);
+}
+
+Detection detection_from_structure(const GstStructure* s) {
+  Detection d;
+  d.family = get_family(s);
+  d.id = get_id(s);
+  d.keypoints = get_point_array<4>(s, LFTAG_FIELD_KEYPOINTS);
+  d.centroids = get_points(s, LFTAG_FIELD_CENTROIDS);
+  d.corners = get_point_array<4>(s, LFTAG_FIELD_CORNERS);
+  d.center = get_point(s, LFTAG_FIELD_CENTER);
+  d.rvec = get_vec3(s, LFTAG_FIELD_RVEC);
+  d.tvec = get_vec3(s, LFTAG_FIELD_TVEC);
+  d.tag_size = get_double(s, LFTAG_FIELD_TAG_SIZE);
+  d.calibrated = get_boolean(s, LFTAG_FIELD_CALIBRATED);
+  d.decode_error = get_double(s, LFTAG_FIELD_DECODE_ERROR);
+  d.edge_score = get_double(s, LFTAG_FIELD_EDGE_SCORE);
+  d.reprojection_error = get_double(s, LFTAG_FIELD_REPROJECTION_ERROR);
+  return d;
+}
+
+MarkerTruth truth_from_structure(const GstStructure* s) {
+  MarkerTruth t;
+  t.family = get_family(s);
+  t.id = get_id(s);
+  t.keypoints = get_points(s, LFTAG_FIELD_KEYPOINTS);
+  t.centers = get_points(s, LFTAG_FIELD_CENTERS);
+  t.centroids = get_points(s, LFTAG_FIELD_CENTROIDS);
+  t.corners = get_points(s, LFTAG_FIELD_CORNERS);
+  t.rvec = get_vec3(s, LFTAG_FIELD_RVEC);
+  t.tvec = get_vec3(s, LFTAG_FIELD_TVEC);
+  t.tag_size = get_double(s, LFTAG_FIELD_TAG_SIZE);
+  t.fully_visible = get_boolean(s, LFTAG_FIELD_FULLY_VISIBLE);
+  t.edge_px = get_double(s, LFTAG_FIELD_EDGE_PX);
+  return t;
+}
+
+std::optional<FrameDetections> read_detection_meta(GstBuffer* buffer) {
+  const GstStructure* s = meta_structure(buffer, LFTAG_META_NAME);
+  if (!s) return std::nullopt;
+  FrameDetections frame;
+  frame.width = get_int(s, LFTAG_META_FIELD_WIDTH);
+  frame.height = get_int(s, LFTAG_META_FIELD_HEIGHT);
+  frame.detections = read_list(s, LFTAG_META_FIELD_DETECTIONS, LFTAG_DETECTION_STRUCTURE_NAME,
+                               detection_from_structure);
+  return frame;
+}
+
+std::optional<FrameTruth> read_truth_meta(GstBuffer* buffer) {
+  const GstStructure* s = meta_structure(buffer, LFTAG_TRUTH_META_NAME);
+  if (!s) return std::nullopt;
+  FrameTruth frame;
+  frame.camera = Camera::pinhole(get_double(s, LFTAG_META_FIELD_FX), get_double(s, LFTAG_META_FIELD_FY),
+                                 get_double(s, LFTAG_META_FIELD_CX), get_double(s, LFTAG_META_FIELD_CY),
+                                 get_int(s, LFTAG_META_FIELD_WIDTH), get_int(s, LFTAG_META_FIELD_HEIGHT));
+  const GValue* distortion = value_of(s, LFTAG_META_FIELD_DISTORTION);
+  frame.camera.distortion = doubles_of(distortion);
+  if (!GST_VALUE_HOLDS_ARRAY(distortion) || frame.camera.distortion.size() != gst_value_array_get_size(distortion))
+    malformed(s, LFTAG_META_FIELD_DISTORTION, "is not an array of doubles");
+  frame.markers = read_list(s, LFTAG_META_FIELD_MARKERS, LFTAG_TRUTH_STRUCTURE_NAME, truth_from_structure);
+  return frame;
+}
+
+}  // namespace lftag::gst

@@ -1,0 +1,18 @@
+/* SPDX-License-Identifier: LGPL-2.1-or-later */
+/* The lftag plugin: LFTag fiducial markers in GStreamer pipelines. */
+#include <gst/gst.h>
+
+#include "gstlftagtestsrc.h"
+#include "lftagmeta.h"
+
+static gboolean
+plugin_init (GstPlugin * plugin)
+{
+  lftag::gst::detection_meta_info ();
+  lftag::gst::truth_meta_info ();
+  return GST_ELEMENT_REGISTER (lftagtestsrc, plugin);
+}
+
+GST_PLUGIN_DEFINE (GST_VERSION_MAJOR, GST_VERSION_MINOR, lftag,
+    "LFTag fiducial markers: synthetic video with ground truth",
+    plugin_init, VERSION, "LGPL", PACKAGE, GST_PACKAGE_ORIGIN)
