@@ -1,0 +1,91 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Reads LFTagTruthMeta from Python (PyGObject), as gst/lftag-meta.h says one can, after
+videoconvert and videoscale. Reports each case as TAP."""
+import traceback
+
+import gi
+
+gi.require_version("Gst", "1.0")
+from gi.repository import Gst  # noqa: E402
+
+Gst.init(None)
+CASES = []
+
+
+def case(function):
+    CASES.append(function)
+    return function
+
+
+def frames(launch, count):
+    pipeline = Gst.parse_launch(launch + " ! appsink name=sink sync=false")
+    sink = pipeline.get_by_name("sink")
+    pipeline.set_state(Gst.State.PLAYING)
+    buffers = []
+    for _ in range(count):
+        sample = sink.emit("try-pull-sample", 60 * Gst.SECOND)
+        assert sample is not None, "no frame from " + launch
+        buffers.append(sample.get_buffer())
+    pipeline.set_state(Gst.State.NULL)
+    return buffers
+
+
+def truth(buffer):
+    meta = buffer.get_custom_meta("LFTagTruthMeta")
+    assert meta is not None, "no LFTagTruthMeta"
+    return meta.get_structure()
+
+
+@case
+def truth_after_convert_and_scale():
+    buffers = frames("lftagtestsrc num-buffers=2 ids=6789,42 ! video/x-raw,width=640,height=480 ! "
+                     "videoconvert ! videoscale ! video/x-raw,format=I420,width=320,height=240", 2)
+    for buffer in buffers:
+        s = truth(buffer)
+        assert (s.get_value("width"), s.get_value("height")) == (640, 480)
+        assert s.get_value("fx") == 640.0 and list(s.get_value("distortion")) == []
+        markers = list(s.get_value("markers"))
+        assert [m.get_name() for m in markers] == ["lftag/truth"] * 2
+        assert [m.get_value("id") for m in markers] == [6789, 42]
+        assert [m.get_value("id-string") for m in markers] == ["6789", "42"]
+        for m in markers:
+            assert m.get_value("family") == "3x3"
+            keypoints = [list(p) for p in m.get_value("keypoints")]
+            assert len(keypoints) == 4 and all(len(p) == 2 and all(isinstance(v, float) for v in p)
+                                               for p in keypoints)
+            assert len(list(m.get_value("centroids"))) == 9
+            assert len(list(m.get_value("corners"))) == 4
+            assert len(list(m.get_value("center"))) == 2
+            assert len(list(m.get_value("rvec"))) == 3 and list(m.get_value("tvec"))[2] > 0
+            assert isinstance(m.get_value("fully-visible"), bool)
+            assert m.get_value("edge-px") > 0 and m.get_value("tag-size") == 0.1
+
+
+@case
+def ids_beyond_64_bits():
+    buffer = frames("lftagtestsrc num-buffers=1 family=8x8 ids=1267650600228229401496703205377", 1)[0]
+    marker = list(truth(buffer).get_value("markers"))[0]
+    assert not marker.has_field("id")
+    assert marker.get_value("id-string") == "1267650600228229401496703205377"
+    assert int(marker.get_value("id-string")) == 2 ** 100 + 1
+
+
+@case
+def truth_is_not_detection():
+    buffer = frames("lftagtestsrc num-buffers=1", 1)[0]
+    assert buffer.get_custom_meta("LFTagMeta") is None
+
+
+print(f"1..{len(CASES)}")
+failed = 0
+for number, function in enumerate(CASES, 1):
+    try:
+        function()
+        print(f"ok {number} - {function.__name__}")
+    except Exception:  # noqa: BLE001 - every failure is reported, then the next case runs
+        failed += 1
+        print(f"not ok {number} - {function.__name__}")
+        for line in traceback.format_exc().splitlines():
+            print("# " + line)
+raise SystemExit(1 if failed else 0)
