@@ -8,16 +8,23 @@
 namespace lftag::detail {
 namespace {
 
-double mean_grey(const RegionTree& tree, int region, const ImageView& image) {
-  double sum = 0;
-  long count = 0;
+// The white region's paper level: the upper quartile of its grey levels. Its mean would
+// sink below the paper's white on a small marker, where most of the region's pixels are
+// mixed with the squares around them, and bias every centroid towards the pixel grid
+// (0.11 px at 0.67 px per unit, enough to misread an axis-aligned marker).
+double white_level(const RegionTree& tree, int region, const ImageView& image) {
+  int histogram[256] = {};
+  int count = 0;
   for (int i = tree.regions[region].first_run; i >= 0; i = tree.runs[i].next) {
     const Run& run = tree.runs[i];
     const std::uint8_t* row = image.data + run.y * image.stride;
-    for (int x = run.x0; x < run.x1; ++x) sum += row[x];
+    for (int x = run.x0; x < run.x1; ++x) ++histogram[row[x]];
     count += run.x1 - run.x0;
   }
-  return count ? sum / count : 255.0;
+  int seen = 0;
+  for (int level = 0; level < 256; ++level)
+    if ((seen += histogram[level]) >= 0.75 * count) return level;
+  return 255;
 }
 
 }  // namespace
@@ -119,7 +126,7 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
       c.family = f;
       c.white_region = r;
       c.white_area = white.area;
-      c.white_level = params.centroid_reference == CentroidReference::local_white ? mean_grey(tree, r, image) : 255.0;
+      c.white_level = params.centroid_reference == CentroidReference::local_white ? white_level(tree, r, image) : 255.0;
       double lo = 1e300, hi = 0;
       for (int i = 0; i < n2; ++i) {
         c.blobs.push_back(measure_blob(tree, kids[i], image, binary, params.dilation, c.white_level));

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 
+#include <Eigen/Dense>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -17,6 +18,37 @@ namespace lftag::detail {
 
 double elapsed_ms(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+std::optional<cv::Matx33d> fit_homography(const std::vector<cv::Point2d>& from, const std::vector<cv::Point2d>& to) {
+  const std::size_t count = from.size();
+  if (count < 4 || to.size() != count) return std::nullopt;
+  // Normalise both point sets (centroid at 0, mean distance sqrt 2) for conditioning.
+  auto normaliser = [](const std::vector<cv::Point2d>& pts) {
+    cv::Point2d c;
+    for (const cv::Point2d& p : pts) c += p;
+    c *= 1.0 / pts.size();
+    double d = 0;
+    for (const cv::Point2d& p : pts) d += cv::norm(p - c);
+    const double s = d > 0 ? std::sqrt(2.0) * pts.size() / d : 1.0;
+    return cv::Matx33d(s, 0, -s * c.x, 0, s, -s * c.y, 0, 0, 1);
+  };
+  const cv::Matx33d tf = normaliser(from), tt = normaliser(to);
+  Eigen::Matrix<double, 8, 8> ata = Eigen::Matrix<double, 8, 8>::Zero();
+  Eigen::Matrix<double, 8, 1> atb = Eigen::Matrix<double, 8, 1>::Zero();
+  for (std::size_t i = 0; i < count; ++i) {
+    const double u = tf(0, 0) * from[i].x + tf(0, 2), v = tf(1, 1) * from[i].y + tf(1, 2);
+    const double x = tt(0, 0) * to[i].x + tt(0, 2), y = tt(1, 1) * to[i].y + tt(1, 2);
+    Eigen::Matrix<double, 8, 1> rx, ry;
+    rx << u, v, 1, 0, 0, 0, -x * u, -x * v;
+    ry << 0, 0, 0, u, v, 1, -y * u, -y * v;
+    ata += rx * rx.transpose() + ry * ry.transpose();
+    atb += rx * x + ry * y;
+  }
+  const Eigen::Matrix<double, 8, 1> h = ata.ldlt().solve(atb);
+  if (!h.allFinite()) return std::nullopt;
+  const cv::Matx33d hn(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
+  return tt.inv() * hn * tf;
 }
 
 void distort(const Camera& camera, std::vector<cv::Point2d>& points) {
@@ -115,19 +147,14 @@ double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const I
 // See Decoding::ink_spread.
 double ink_spread(const Candidate& c, const Decoding& d) {
   const Family& f = c.family;
-  std::vector<cv::Point2f> units, image;
+  std::vector<cv::Point2d> units;
   std::vector<double> area;
   for (int g = 0; g < f.cell_count(); ++g) {
     const UnitRect sq = f.square(g, f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g)));
-    units.emplace_back(float(sq.x + sq.width / 2), float(sq.y + sq.height / 2));
-    image.emplace_back(cv::Point2f(c.blobs[d.blob_of_cell[g]].point));
+    units.emplace_back(sq.x + sq.width / 2, sq.y + sq.height / 2);
     area.push_back(sq.width * sq.height);
   }
-  cv::Matx33d h = d.homography;
-  if (f.n() > 2) {
-    const cv::Mat fit = cv::findHomography(units, image, 0);
-    if (!fit.empty()) h = cv::Matx33d(fit);
-  }
+  const cv::Matx33d& h = d.homography;
   const double det = cv::determinant(h);
   double lo = 1e300, hi = 0;
   for (int g = 0; g < f.cell_count(); ++g) {
@@ -156,86 +183,136 @@ double edge_gradient(const ImageView& image, const Camera& camera, const cv::Mat
   return sum / samples.size();
 }
 
+namespace {
+
+// Under homography h, each data cell takes the blob and position (of its four) nearest to
+// each other. False when two cells claim one blob: then h cannot be this marker's.
+bool assign_cells(const Candidate& c, const KeyPoints& k, const cv::Matx33d& h, Decoding& d) {
+  const Family& f = c.family;
+  const std::array<int, 4> kc = f.keypoint_cells();
+  std::vector<char> used(c.blobs.size(), 0);
+  d.blob_of_cell.assign(f.cell_count(), -1);
+  d.blob_of_cell[kc[0]] = k.blob[0], d.blob_of_cell[kc[1]] = k.blob[1];
+  used[k.blob[0]] = used[k.blob[1]] = 1;
+  for (int g = 0; g < f.cell_count(); ++g) {
+    if (f.is_baseline(g)) continue;
+    double nearest = std::numeric_limits<double>::max();
+    int blob = -1;
+    for (int v = 0; v < 4; ++v) {
+      const cv::Point2d p = apply(h, f.center(g, v));
+      for (int j = 0; j < int(c.blobs.size()); ++j) {
+        const cv::Point2d e = c.blobs[j].point - p;
+        if (e.dot(e) < nearest) nearest = e.dot(e), blob = j;
+      }
+    }
+    if (used[blob]) return false;
+    used[blob] = 1;
+    d.blob_of_cell[g] = blob;
+  }
+  return true;
+}
+
+// With the blobs assigned, each data cell's digit is its position nearest to its blob under
+// d.homography; fills the id, the squared residual (pixels^2) and the worst cell (units).
+double read_digits(const Candidate& c, Decoding& d) {
+  const Family& f = c.family;
+  double residual = 0;
+  d.id = TagId();
+  d.worst_cell = 0;
+  for (int g = 0; g < f.cell_count(); ++g) {
+    if (f.is_baseline(g)) continue;
+    const cv::Point2d blob = c.blobs[d.blob_of_cell[g]].point;
+    double nearest = std::numeric_limits<double>::max();
+    int digit = 0;
+    for (int v = 0; v < 4; ++v) {
+      const cv::Point2d e = blob - apply(d.homography, f.center(g, v));
+      if (e.dot(e) < nearest) nearest = e.dot(e), digit = v;
+    }
+    d.id = d.id.with_digit(f.data_index(g), digit);
+    residual += nearest;
+    const cv::Point2d off = blob - apply(d.homography, f.center(g, digit));
+    d.worst_cell = std::max(d.worst_cell, cv::norm(pixels_to_units(d.homography, f.center(g, digit)) * cv::Vec2d(off.x, off.y)));
+  }
+  return residual;
+}
+
+// The homography through all n^2 blobs at their decoded positions.
+std::optional<cv::Matx33d> refit(const Candidate& c, const Decoding& d) {
+  const Family& f = c.family;
+  std::vector<cv::Point2d> units, points;
+  for (int g = 0; g < f.cell_count(); ++g) {
+    units.push_back(f.center(g, f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g))));
+    points.push_back(c.blobs[d.blob_of_cell[g]].point);
+  }
+  return fit_homography(units, points);
+}
+
+}  // namespace
+
 std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const ImageView& image, const Camera& camera,
                                const DetectorParams& params, DetectionStats& stats,
                                std::vector<std::vector<cv::Point2d>>* hypotheses) {
   const Family& f = c.family;
-  const int cells = f.cell_count(), side = f.side();
+  const int side = f.side();
   const std::array<int, 4> kc = f.keypoint_cells();
   std::vector<cv::Point2f> observed(4);
   for (int i = 0; i < 4; ++i) observed[i] = cv::Point2f(c.blobs[k.blob[i]].point);
-  const double tau3 = params.decode_threshold(f);
   const double norm = std::sqrt(std::max(1.0, c.white_area));
 
-  std::optional<Decoding> best;
-  std::vector<char> used(c.blobs.size());
+  std::vector<Decoding> tried;
   for (int hypothesis = 0; hypothesis < 16; ++hypothesis) {
     auto start = std::chrono::steady_clock::now();
     const int d2 = hypothesis / 4, d3 = hypothesis % 4;
     const std::vector<cv::Point2f> units = {cv::Point2f(f.center(kc[0], 0)), cv::Point2f(f.center(kc[1], 0)),
                                             cv::Point2f(f.center(kc[2], d2)), cv::Point2f(f.center(kc[3], d3))};
     const cv::Mat hm = cv::getPerspectiveTransform(units, observed);
+    stats.hypotheses_ms += elapsed_ms(start);
     if (hm.empty()) continue;
-    const cv::Matx33d h(hm);
-    const double edge = edge_gradient(image, camera, h, 2, side - 2);
+    start = std::chrono::steady_clock::now();
+
+    Decoding d;
+    d.homography = cv::Matx33d(hm);
+    if (!assign_cells(c, k, d.homography, d)) {
+      stats.decode_ms += elapsed_ms(start);
+      continue;
+    }
+    read_digits(c, d);
+    // The four key points fix this homography; all n^2 blobs judge it. The marker's id
+    // explains every centroid with one homography, a wrong hypothesis cannot.
+    if (f.n() > 2)
+      if (const auto h = refit(c, d)) d.homography = *h;
+    const double residual = read_digits(c, d);
+    stats.decode_ms += elapsed_ms(start);
+
+    start = std::chrono::steady_clock::now();
+    d.edge_score = edge_gradient(image, camera, d.homography, 2, side - 2);
     if (hypotheses) {
       std::vector<cv::Point2d> outline;
-      for (const cv::Point2d& u : square(2, side - 2)) outline.push_back(apply(h, u));
+      for (const cv::Point2d& u : square(2, side - 2)) outline.push_back(apply(d.homography, u));
       distort(camera, outline);
       hypotheses->push_back(outline);
     }
     stats.hypotheses_ms += elapsed_ms(start);
-    start = std::chrono::steady_clock::now();
-
-    Decoding d;
-    d.homography = h;
-    d.edge_score = edge;
-    d.blob_of_cell.assign(cells, -1);
-    std::fill(used.begin(), used.end(), 0);
-    d.blob_of_cell[kc[0]] = k.blob[0], d.blob_of_cell[kc[1]] = k.blob[1];
-    used[k.blob[0]] = used[k.blob[1]] = 1;
-    double residual = 0;
-    bool one_to_one = true;
-    for (int g = 0; g < cells && one_to_one; ++g) {
-      if (f.is_baseline(g)) continue;
-      double nearest = std::numeric_limits<double>::max();
-      int digit = 0, blob = -1;
-      for (int v = 0; v < 4; ++v) {
-        const cv::Point2d p = apply(h, f.center(g, v));
-        for (int j = 0; j < int(c.blobs.size()); ++j) {
-          const cv::Point2d e = c.blobs[j].point - p;
-          const double d2sq = e.dot(e);
-          if (d2sq < nearest) nearest = d2sq, digit = v, blob = j;
-        }
-      }
-      // Two cells claiming one blob cannot be this marker.
-      if (used[blob]) one_to_one = false;
-      used[blob] = 1;
-      d.blob_of_cell[g] = blob;
-      d.id = d.id.with_digit(f.data_index(g), digit);
-      residual += nearest;
-      const cv::Point2d off = c.blobs[blob].point - apply(h, f.center(g, digit));
-      d.worst_cell = std::max(d.worst_cell, cv::norm(pixels_to_units(h, f.center(g, digit)) * cv::Vec2d(off.x, off.y)));
-    }
-    if (!one_to_one || !(edge > 0)) {
-      stats.decode_ms += elapsed_ms(start);
-      continue;
-    }
-    if (f.n() == 2) {
-      // Four blobs fix the homography exactly, so the residual says nothing: the grey
-      // levels where the marker must be black or white decide, then the edge.
-      d.error = misordered_pairs(f, d.id, h, image, camera);
-      if (!best || d.error < best->error || (d.error == best->error && edge > best->edge_score)) best = d;
-    } else {
-      d.error = residual / norm / edge;
-      if (!best || d.error < best->error) best = d;
-    }
-    stats.decode_ms += elapsed_ms(start);
+    if (!(d.edge_score > 0)) continue;
+    // 2x2: four blobs fix the homography exactly and leave no residual, so the grey
+    // levels where the marker must be black or white decide.
+    d.error = f.n() == 2 ? misordered_pairs(f, d.id, d.homography, image, camera) : residual / norm / d.edge_score;
+    tried.push_back(d);
   }
+  if (tried.empty()) return std::nullopt;
+  const auto better = [](const Decoding& a, const Decoding& b) {
+    return a.error != b.error ? a.error < b.error : a.edge_score > b.edge_score;
+  };
+  const Decoding best = *std::min_element(tried.begin(), tried.end(), better);
+
   // tau3, and every digit clear of the midpoint between two positions.
-  if (!best || best->error > tau3 || best->worst_cell > params.max_cell_residual) return std::nullopt;
-  best->ink_spread = ink_spread(c, *best);
-  return best;
+  if (best.error > params.decode_threshold(f) || best.worst_cell > params.max_cell_residual) return std::nullopt;
+  // Another id that fits almost as well makes the reading a guess.
+  for (const Decoding& d : tried)
+    if (d.id != best.id && d.error < params.min_decode_margin * best.error) return std::nullopt;
+  Decoding out = best;
+  out.ink_spread = ink_spread(c, out);
+  return out;
 }
 
 }  // namespace lftag::detail

@@ -49,6 +49,7 @@ void DetectorParams::validate() const {
   if (!(min_spread_ratio >= 0 && min_spread_ratio <= 1)) fail("the spread ratio (tau2) must be in [0, 1]");
   if (!(max_cell_residual > 0 && max_cell_residual <= 1)) fail("the cell residual bound must be in (0, 1] units");
   if (!(max_ink_spread >= 1)) fail("the ink spread bound must be at least 1");
+  if (!(min_decode_margin >= 1)) fail("the decoding margin must be at least 1");
   for (double t : max_decode_error)
     if (!(t >= 0) || !std::isfinite(t)) fail("decode error thresholds (tau3) must be finite and not negative");
   if (!(tag_size > 0) || !std::isfinite(tag_size)) fail("the tag size must be positive");

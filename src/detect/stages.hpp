@@ -98,7 +98,7 @@ struct Candidate {
   Family family{3};
   int white_region = -1;
   double white_area = 0;   // pixels of the white region
-  double white_level = 0;  // mean grey of the white region
+  double white_level = 0;  // upper quartile of the white region's grey levels
   std::vector<Blob> blobs; // the n^2 largest black children
 };
 
@@ -150,6 +150,9 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
 
 // Mean 3x3 Sobel magnitude along the square x, y in {a, b} (units) under homography h.
 double edge_gradient(const ImageView& image, const Camera& camera, const cv::Matx33d& h, double a, double b);
+
+// Least-squares homography (h33 = 1) taking `from` to `to`; none when degenerate.
+std::optional<cv::Matx33d> fit_homography(const std::vector<cv::Point2d>& from, const std::vector<cv::Point2d>& to);
 
 // Undistorted pixels -> distorted pixels of `camera`, in place.
 void distort(const Camera& camera, std::vector<cv::Point2d>& points);

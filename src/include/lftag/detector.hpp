@@ -80,6 +80,9 @@ struct DetectorParams {
   // bound too: every data centroid within this many units of its decoded position (the
   // four positions are 1 u apart, so 0.5 would be a coin toss).
   double max_cell_residual = 0.35;
+  // Reject a reading when a hypothesis giving another id has a decoding error within this
+  // factor of the best one's: at the limit of resolution two ids can fit nearly as well.
+  double min_decode_margin = 2.0;
   // The squares' ink per unit of design area, largest over smallest, under the decoded
   // homography: at most 1.24 for true markers in our renders, from 3 m to the range limit,
   // tilted or blurred; 16/9 when one square has the wrong size, and at least
