@@ -78,4 +78,30 @@ TagId TagId::with_digit(int k, int value) const {
 
 std::string to_string(TagId id) { return id.to_decimal(); }
 
+std::vector<TagId> parse_id_list(std::string_view text, std::size_t max_ids) {
+  std::vector<TagId> ids;
+  auto too_many = [&] {
+    throw std::invalid_argument("the id list '" + std::string(text) + "' holds more than " +
+                                std::to_string(max_ids) + " ids");
+  };
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = std::min(text.find(',', start), text.size());
+    const std::string_view item = text.substr(start, comma - start);
+    const std::size_t dash = item.find('-');
+    if (dash == std::string_view::npos) {
+      ids.push_back(TagId::parse(item));
+    } else {
+      const TagId lo = TagId::parse(item.substr(0, dash)), hi = TagId::parse(item.substr(dash + 1));
+      if (!lo.fits_u64() || !hi.fits_u64() || hi < lo)
+        throw std::invalid_argument("id range '" + std::string(item) + "' must run upwards, below 2^64");
+      if (hi.low() - lo.low() >= max_ids) too_many();
+      for (std::uint64_t v = lo.low(); v <= hi.low(); ++v) ids.emplace_back(v);
+    }
+    if (ids.size() > max_ids) too_many();
+    start = comma + 1;
+  }
+  return ids;
+}
+
 }  // namespace lftag

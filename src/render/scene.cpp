@@ -186,6 +186,7 @@ MarkerTruth make_truth(const Camera& camera, const SceneMarker& m) {
     t.centroids.emplace_back(cx / (3 * a), cy / (3 * a));
   }
   t.corners = project({oc.begin(), oc.end()});
+  t.center = project({cv::Point2d(m.family.side() / 2.0, m.family.side() / 2.0)})[0];
   cv::Matx33d r;
   cv::Rodrigues(m.rvec, r);
   bool visible = true;
@@ -274,7 +275,11 @@ cv::Mat1f SceneRenderer::render_linear(const std::vector<SceneTarget>& targets) 
 }
 
 cv::Mat1b SceneRenderer::render(const std::vector<SceneTarget>& targets, std::uint64_t seed) const {
-  cv::Mat1f image = render_linear(targets);
+  return quantize(render_linear(targets), seed);
+}
+
+cv::Mat1b SceneRenderer::quantize(const cv::Mat1f& linear, std::uint64_t seed) const {
+  cv::Mat1f image = linear.clone();
   if (params_.noise_sigma > 0) {
     cv::Mat1f noise(image.size());
     cv::RNG rng(seed ? seed : params_.seed);

@@ -30,27 +30,6 @@ double parse_length(const std::string& text) {
   return value * scale;
 }
 
-// "7", "0x1f", "1,2,5-9" -> ids. Ranges are for ids below 2^64 and hold at most 100000 ids.
-std::vector<TagId> parse_ids(const std::string& text) {
-  std::vector<TagId> ids;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    const std::size_t comma = std::min(text.find(',', start), text.size());
-    const std::string item = text.substr(start, comma - start);
-    const std::size_t dash = item.find('-');
-    if (dash == std::string::npos) {
-      ids.push_back(TagId::parse(item));
-    } else {
-      const TagId lo = TagId::parse(item.substr(0, dash)), hi = TagId::parse(item.substr(dash + 1));
-      if (!lo.fits_u64() || !hi.fits_u64() || hi < lo || hi.low() - lo.low() >= 100000)
-        throw std::invalid_argument("id range '" + item + "' must run upwards over at most 100000 ids");
-      for (std::uint64_t v = lo.low(); v <= hi.low(); ++v) ids.emplace_back(v);
-    }
-    start = comma + 1;
-  }
-  return ids;
-}
-
 }  // namespace
 
 void add_generate_command(CLI::App& app, int& status) {
@@ -76,7 +55,7 @@ void add_generate_command(CLI::App& app, int& status) {
   cmd->callback([opt, &status] {
     try {
       const Family family = Family::parse(opt->family);
-      const std::vector<TagId> ids = parse_ids(opt->ids);
+      const std::vector<TagId> ids = parse_id_list(opt->ids);
       PrintOptions print;
       print.size_m = parse_length(opt->size);
       print.margin_units = opt->margin;

@@ -55,6 +55,7 @@ TEST(Scene, TruthSitsOnTheRenderedCentroids) {
     const cv::Mat1f image = renderer.render_linear({to_target(m)});
     const MarkerTruth truth = make_truth(p.camera, m);
     EXPECT_TRUE(truth.fully_visible);
+    EXPECT_LT(cv::norm(truth.center - p.camera.project({cv::Point3d(0, 0, 0)}, m.rvec, m.tvec)[0]), 1e-9);
     EXPECT_NEAR(truth.edge_px, 100.0, 15.0);
     const float white = 255.0f * m.white;
     for (int g = 0; g < m.family.cell_count(); ++g) {
@@ -134,6 +135,8 @@ TEST(Scene, NoiseBackgroundAndLight) {
   EXPECT_NEAR(mean[0], 127.5, 1.0);
   EXPECT_NEAR(sd[0], 5.0, 0.3);
   EXPECT_EQ(cv::norm(a, SceneRenderer(p).render({}), cv::NORM_INF), 0.0);  // seeded
+  const SceneRenderer r(p);
+  EXPECT_EQ(cv::norm(a, r.quantize(r.render_linear({})), cv::NORM_INF), 0.0);
   EXPECT_GT(cv::norm(a, SceneRenderer(p).render({}, 99), cv::NORM_INF), 0.0);
 
   p.noise_sigma = 0;

@@ -58,3 +58,15 @@ TEST(TagId, FitsIn53Bits) {
   EXPECT_FALSE(TagId(1ull << 53).fits_53_bits());
   EXPECT_FALSE(TagId(1, 0).fits_53_bits());
 }
+
+TEST(TagId, ParsesLists) {
+  const auto ids = lftag::parse_id_list("7,0x10,3-5");
+  ASSERT_EQ(ids.size(), 5u);
+  EXPECT_EQ(ids[1], TagId(16));
+  EXPECT_EQ(ids[4], TagId(5));
+  EXPECT_THROW(lftag::parse_id_list("5-3"), std::invalid_argument);
+  EXPECT_THROW(lftag::parse_id_list("1,,2"), std::invalid_argument);
+  EXPECT_THROW(lftag::parse_id_list("0-99", 10), std::invalid_argument);
+  EXPECT_THROW(lftag::parse_id_list("1,2,3", 2), std::invalid_argument);
+  EXPECT_EQ(lftag::parse_id_list("340282366920938463463374607431768211455").front(), TagId(~0ull, ~0ull));
+}

@@ -105,6 +105,7 @@ struct MarkerTruth {
   // for a 100 px marker tilted 40 degrees).
   std::vector<cv::Point2d> centroids;
   std::vector<cv::Point2d> corners;    // outer corners of the border, clockwise from top-left
+  cv::Point2d center;                  // the marker's centre
   bool fully_visible = false;          // in front of the camera and wholly inside the frame
   double edge_px = 0;                  // mean projected edge of the black border, pixels
 };
@@ -120,6 +121,10 @@ class SceneRenderer {
   cv::Mat1b render(const std::vector<SceneTarget>& targets, std::uint64_t seed = 0) const;
   // The same without quantisation to 8 bits and without noise: grey levels 0..255.
   cv::Mat1f render_linear(const std::vector<SceneTarget>& targets) const;
+  // The last step of render(): adds the noise (seeded as render() is) and rounds to 8 bits.
+  // render(t, s) == quantize(render_linear(t), s); frames averaged from several linear
+  // renders (sub-frame motion blur) go through it once.
+  cv::Mat1b quantize(const cv::Mat1f& linear, std::uint64_t seed = 0) const;
 
  private:
   SceneParams params_;

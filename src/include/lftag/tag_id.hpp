@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace lftag {
 
@@ -46,5 +47,9 @@ class TagId {
 };
 
 std::string to_string(TagId id);  // decimal
+
+// Parses a list such as "7", "0x1f" or "1,2,5-9" (ranges only below 2^64). Throws
+// std::invalid_argument for bad text, a descending range, or more than `max_ids` ids.
+std::vector<TagId> parse_id_list(std::string_view text, std::size_t max_ids = 100000);
 
 }  // namespace lftag
