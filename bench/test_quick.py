@@ -1,0 +1,94 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""meson test 'bench:quick': the benchmark suite end to end on two peers.
+
+    test_quick.py LFTAG_BENCH PLOT_PY WORK_DIR
+
+Runs every experiment in quick mode, then the plots, and fails when the program fails
+(its "check" experiment fails when a peer misses its own markers at 2 m, gets their ids,
+centres or poses wrong), when a result file is missing or malformed, or when a peer is
+not found at the range sweep's first distance. It asserts nothing about speed.
+"""
+import csv
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+SYSTEMS = ["apriltag-36h11-d2", "aruco-36h11"]
+# Every file an experiment writes, with columns it must have; `rows`: at least one row
+# per system (files such as fp_detections.csv may rightly be empty).
+EXPECTED = {
+    "check.csv": (["system", "id", "found", "rotation_error_deg"], True),
+    "range.csv": (["system", "distance_m", "markers", "found", "wrong"], True),
+    "range_summary.csv": (["system", "dictionary_size", "first_missed_m", "missed20_m"], True),
+    "angle.csv": (["system", "angle_deg", "found"], True),
+    "angle_summary.csv": (["system", "first_missed_deg"], True),
+    "blur.csv": (["system", "blur_angle_deg", "blur_fraction", "found"], True),
+    "blur_summary.csv": (["system", "blur_angle_deg", "max_fraction_all_found", "never_missed"], True),
+    "pose.csv": (["system", "sweep", "rotation_error_deg", "translation_error_m"], True),
+    "pose_summary.csv": (["system", "sweep", "median_rotation_deg", "median_translation_m"], True),
+    "fp_summary.csv": (["system", "width", "height", "frames", "false_positives"], True),
+    "fp_detections.csv": (["system", "frame", "id"], False),
+    "fp_counters.csv": (["system", "counter", "value"], False),
+    "speed.csv": (["set", "width", "height", "system", "median_ms"], True),
+    "speed_ratios.csv": (["system", "reference", "ratio"], True),
+    "speed_counters.csv": (["system", "counter", "per_frame"], False),
+}
+PLOTS = ["range_vs_dictionary.png", "range_rate.png", "blur_polar.png", "pose_error.png", "speed.png"]
+
+
+def fail(message):
+    print("FAIL: " + message)
+    sys.exit(1)
+
+
+def main(bench, plot, work):
+    work = Path(work)
+    shutil.rmtree(work, ignore_errors=True)
+    run = subprocess.run([bench, "--quick", "--systems", ",".join(SYSTEMS), "--out", str(work)])
+    if run.returncode != 0:
+        fail(f"lftag-bench exited with {run.returncode}")
+
+    for name, (columns, rows_per_system) in EXPECTED.items():
+        path = work / name
+        if not path.exists():
+            fail(f"{name} was not written")
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            rows = list(reader)
+            header = reader.fieldnames or []
+        missing = [c for c in columns if c not in header]
+        if missing:
+            fail(f"{name} lacks columns {missing}")
+        if rows_per_system:
+            absent = [s for s in SYSTEMS if not any(r["system"] == s for r in rows)]
+            if absent:
+                fail(f"{name} has no rows for {absent}")
+
+    with open(work / "range_summary.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if r["first_missed_m"] != "" and float(r["first_missed_m"]) <= 2.0:
+                fail(f"{r['system']} missed a marker at the first range step (2 m)")
+
+    meta = json.loads((work / "meta.json").read_text())
+    if meta["mode"] != "quick" or meta["systems"] != SYSTEMS:
+        fail("meta.json does not describe the run")
+    if not all(e["passed"] for e in meta["experiments"].values()):
+        fail("an experiment reported failure")
+
+    run = subprocess.run([sys.executable, plot, str(work)])
+    if run.returncode != 0:
+        fail(f"plot.py exited with {run.returncode}")
+    for name in PLOTS:
+        if not (work / name).exists() or (work / name).stat().st_size == 0:
+            fail(f"plot {name} was not written")
+    print("bench quick run: all results and plots written")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 4:
+        print(__doc__, file=sys.stderr)
+        sys.exit(2)
+    main(*sys.argv[1:])

@@ -1,0 +1,129 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+#include "trial.hpp"
+
+#include <algorithm>
+
+#include <opencv2/calib3d.hpp>
+
+namespace bench {
+
+lftag::Camera paper_camera() { return lftag::Camera::pinhole(320, 320, 319.5, 239.5, 640, 480); }
+
+cv::Vec3d rotation(double roll_deg, double tilt_deg, double pan_deg) {
+  const double d = CV_PI / 180;
+  cv::Matx33d rz, rx, ry;
+  cv::Rodrigues(cv::Vec3d(0, 0, roll_deg * d), rz);
+  cv::Rodrigues(cv::Vec3d(tilt_deg * d, 0, 0), rx);
+  cv::Rodrigues(cv::Vec3d(0, pan_deg * d, 0), ry);
+  cv::Vec3d rvec;
+  cv::Rodrigues(ry * rx * rz, rvec);
+  return rvec;
+}
+
+Pose place(const lftag::Camera& camera, cv::Point2d center, double distance, const cv::Vec3d& rvec) {
+  const cv::Point2d ideal = camera.undistort({center})[0];
+  const double x = (ideal.x - camera.cx) / camera.fx, y = (ideal.y - camera.cy) / camera.fy;
+  return {rvec, cv::Vec3d(x * distance, y * distance, distance)};
+}
+
+cv::Point2d jittered_center(const lftag::Camera& camera, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> offset(-0.5, 0.5);
+  const double dx = offset(rng), dy = offset(rng);
+  return {(camera.width - 1) / 2.0 + dx, (camera.height - 1) / 2.0 + dy};
+}
+
+double edge_px(const lftag::Camera& camera, const Pose& pose, double tag_size) {
+  const double h = tag_size / 2;
+  const std::vector<cv::Point2d> c =
+      camera.project({{-h, -h, 0}, {h, -h, 0}, {h, h, 0}, {-h, h, 0}}, pose.rvec, pose.tvec);
+  double sum = 0;
+  for (int i = 0; i < 4; ++i) sum += cv::norm(c[(i + 1) % 4] - c[i]);
+  return sum / 4;
+}
+
+double rotation_error_deg(const cv::Vec3d& a, const cv::Vec3d& b) {
+  cv::Matx33d ra, rb;
+  cv::Rodrigues(a, ra);
+  cv::Rodrigues(b, rb);
+  cv::Vec3d diff;
+  cv::Rodrigues(ra * rb.t(), diff);
+  return cv::norm(diff) * 180 / CV_PI;
+}
+
+Outcome score(const std::vector<Detected>& detections, const std::string& id, const Pose& truth, double tag_size,
+              const lftag::Camera& camera) {
+  const cv::Point2d center = camera.project({{0, 0, 0}}, truth.rvec, truth.tvec)[0];
+  const double tolerance = std::max(2.0, edge_px(camera, truth, tag_size) / 4);
+  Outcome out;
+  for (const Detected& d : detections) {
+    const double error = cv::norm(d.center - center);
+    if (d.id != id || error > tolerance) {
+      ++out.wrong;
+      continue;
+    }
+    if (out.found) continue;  // a duplicate of the marker is neither new nor wrong
+    out.found = true;
+    out.center_offset = d.center - center;
+    if (d.pose) {
+      out.rotation_error_deg = rotation_error_deg(d.pose->rvec, truth.rvec);
+      out.translation_error_m = cv::norm(d.pose->tvec - truth.tvec);
+    }
+  }
+  return out;
+}
+
+Outcome run_trial(FiducialSystem& system, const lftag::SceneRenderer& renderer, const std::string& id,
+                  double tag_size, const Pose& pose) {
+  const cv::Mat1b image = renderer.render({system.target(id, tag_size, pose.rvec, pose.tvec)});
+  return score(system.detect(image), id, pose, tag_size, renderer.params().camera);
+}
+
+std::vector<Step> sweep(const std::vector<double>& values, int markers,
+                        const std::function<Outcome(int, int)>& trial,
+                        const std::function<bool(const std::vector<Step>&)>& done) {
+  std::vector<Step> steps;
+  for (std::size_t s = 0; s < values.size(); ++s) {
+    Step step;
+    step.value = values[s];
+    for (int m = 0; m < markers; ++m) {
+      const Outcome o = trial(int(s), m);
+      ++step.markers;
+      step.found += o.found;
+      step.wrong += o.wrong;
+    }
+    steps.push_back(step);
+    if (done(steps)) break;
+  }
+  return steps;
+}
+
+std::function<bool(const std::vector<Step>&)> after_empty_steps(int count) {
+  return [count](const std::vector<Step>& steps) {
+    if (int(steps.size()) < count) return false;
+    return std::all_of(steps.end() - count, steps.end(), [](const Step& s) { return s.found == 0; });
+  };
+}
+
+Limits limits(const std::vector<Step>& steps) {
+  Limits l;
+  for (const Step& s : steps) {
+    const int missed = s.markers - s.found;
+    if (missed > 0 && std::isnan(l.first_missed)) l.first_missed = s.value;
+    if (missed * 5 >= s.markers && missed > 0 && std::isnan(l.missed20)) l.missed20 = s.value;
+    if (s.found > 0) l.last_found = s.value;
+    l.wrong += s.wrong;
+  }
+  return l;
+}
+
+std::vector<double> arange(double start, double stop, double step) {
+  std::vector<double> v;
+  for (int i = 0;; ++i) {
+    const double x = start + i * step;
+    if (x > stop + step * 1e-6) break;
+    v.push_back(std::round(x * 1e9) / 1e9);
+  }
+  return v;
+}
+
+}  // namespace bench

@@ -1,0 +1,85 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// One trial: a marker rendered at a known pose, detected and scored against the truth;
+// and sweeps of trials over a growing difficulty (distance, angle, blur).
+#pragma once
+
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "lftag/camera.hpp"
+#include "lftag/render.hpp"
+#include "system.hpp"
+
+namespace bench {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// The LFTag paper's simulation camera: 640x480, fx = fy = 320, no distortion.
+lftag::Camera paper_camera();
+
+// A marker rotation as `lftag render` makes it: roll in the marker plane, then tilt
+// about the camera's x axis, then pan about its y axis (degrees).
+cv::Vec3d rotation(double roll_deg, double tilt_deg, double pan_deg = 0);
+
+// The pose with rotation `rvec` whose marker centre lies at depth `distance` on the
+// ray through image point `center`.
+Pose place(const lftag::Camera& camera, cv::Point2d center, double distance, const cv::Vec3d& rvec);
+
+// The image centre moved by a random sub-pixel offset (up to half a pixel each way).
+cv::Point2d jittered_center(const lftag::Camera& camera, std::mt19937_64& rng);
+
+struct Outcome {
+  bool found = false;  // a detection with the right id at the marker's place
+  int wrong = 0;       // detections with another id, or with the right id elsewhere
+  cv::Point2d center_offset{kNaN, kNaN};  // found centre - true centre, pixels
+  double rotation_error_deg = kNaN;   // of the found detection, when it has a pose
+  double translation_error_m = kNaN;
+};
+
+// Mean projected edge of the tag (outer border) in pixels.
+double edge_px(const lftag::Camera& camera, const Pose& pose, double tag_size);
+
+// Scores detections against one marker: a detection is the marker when its id is right
+// and its centre lies within a quarter of the marker's edge (at least 2 px) of the truth.
+Outcome score(const std::vector<Detected>& detections, const std::string& id, const Pose& truth, double tag_size,
+              const lftag::Camera& camera);
+
+// Renders marker `id` of `system` alone with `pose`, detects it and scores the result.
+// The system must have been given the renderer's camera and `tag_size`.
+Outcome run_trial(FiducialSystem& system, const lftag::SceneRenderer& renderer, const std::string& id,
+                  double tag_size, const Pose& pose);
+
+// Angle between two rotations, degrees.
+double rotation_error_deg(const cv::Vec3d& rvec_a, const cv::Vec3d& rvec_b);
+
+// One value of a swept parameter and how the markers fared there.
+struct Step {
+  double value = 0;
+  int markers = 0, found = 0, wrong = 0;
+};
+
+// Runs trial(step, marker) for every marker at values[0], values[1], ... and stops after
+// a step for which `done` (given all steps so far) is true.
+std::vector<Step> sweep(const std::vector<double>& values, int markers,
+                        const std::function<Outcome(int step, int marker)>& trial,
+                        const std::function<bool(const std::vector<Step>&)>& done);
+
+// Stop rule: `count` consecutive steps found nothing.
+std::function<bool(const std::vector<Step>&)> after_empty_steps(int count);
+
+// What a sweep reached: the first value at which a marker was missed, the first at which
+// 20 % or more were missed, the last at which any was found, and all wrong detections.
+struct Limits {
+  double first_missed = kNaN, missed20 = kNaN, last_found = kNaN;
+  int wrong = 0;
+};
+Limits limits(const std::vector<Step>& steps);
+
+// start, start + step, ... up to `stop` inclusive (within rounding).
+std::vector<double> arange(double start, double stop, double step);
+
+}  // namespace bench
