@@ -15,12 +15,11 @@ namespace {
 double white_level(const RegionTree& tree, int region, const ImageView& image) {
   int histogram[256] = {};
   int count = 0;
-  for (int i = tree.regions[region].first_run; i >= 0; i = tree.runs[i].next) {
-    const Run& run = tree.runs[i];
-    const std::uint8_t* row = image.data + run.y * image.stride;
-    for (int x = run.x0; x < run.x1; ++x) ++histogram[row[x]];
-    count += run.x1 - run.x0;
-  }
+  tree.for_each_run(region, [&](int y, int x0, int x1) {
+    const std::uint8_t* row = image.data + y * image.stride;
+    for (int x = x0; x < x1; ++x) ++histogram[row[x]];
+    count += x1 - x0;
+  });
   int seen = 0;
   for (int level = 0; level < 256; ++level)
     if ((seen += histogram[level]) >= 0.75 * count) return level;
@@ -45,10 +44,9 @@ Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, co
   for (int y = y0; y <= y1; ++y)
     for (int x = x0; x <= x1; ++x)
       if (binary.black(x, y)) cls[std::size_t(y - y0) * w + (x - x0)] = kOther;
-  for (int i = r.first_run; i >= 0; i = tree.runs[i].next) {
-    const Run& run = tree.runs[i];
-    std::fill_n(cls.begin() + std::size_t(run.y - y0) * w + (run.x0 - x0), run.x1 - run.x0, kOwn);
-  }
+  tree.for_each_run(region, [&](int y, int rx0, int rx1) {
+    std::fill_n(cls.begin() + std::size_t(y - y0) * w + (rx0 - x0), rx1 - rx0, kOwn);
+  });
 
   const int limit = reach * reach;  // a Euclidean radius: twice as accurate at 1 px per unit as the L-infinity ring
   double m = 0, mx = 0, my = 0;

@@ -3,6 +3,7 @@
 // (paper section IV). Private to the library.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdint>
@@ -30,31 +31,46 @@ struct BinaryImage {
 void threshold_mean(const ImageView& image, int window, int offset, cv::Mat& mean, BinaryImage& out);
 
 // ---------------------------------------------------------------- regions.cpp
-// A horizontal run of pixels of one region; runs of a region form a linked list.
-struct Run {
-  int y, x0, x1;  // pixels x0 .. x1 - 1 of row y
-  int next;       // next run of the same region, -1 at the end
-};
-
 struct Region {
   bool black = false;
   int parent = -1;  // enclosing region (-1 for the frame)
   int area = 0;
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // bounding box, inclusive
-  int first_run = -1;
   int first_child = 0, child_count = 0;  // into RegionTree::children
 };
 
-// The containment tree of the binary image. Black regions are 8-connected and white
-// regions 4-connected, so every boundary separates exactly one region from its parent.
+// The containment tree of the binary image. Black regions are 4-connected and white
+// regions 8-connected, so every boundary separates exactly one region from its parent.
 // The image is framed by white: region 0 is the white frame, holding every white pixel
 // connected to the image border.
 struct RegionTree {
+  // A horizontal run of one colour: pixels x0 .. x1 - 1 of its row. `label` is the
+  // labeller's provisional label; label_region maps it to its region.
+  struct Run {
+    int x0, x1, label;
+  };
   std::vector<Region> regions;
   std::vector<int> children;
-  std::vector<Run> runs;
+  std::vector<Run> runs;        // row by row, left to right
+  std::vector<int> row_start;   // runs of row y: [row_start[y], row_start[y + 1])
+  std::vector<int> label_region;
   static constexpr int kFrame = 0;
+
   const int* children_of(int r) const { return children.data() + regions[r].first_child; }
+
+  // Calls f(y, x0, x1) for every run of region r, top to bottom: the runs of the rows in
+  // its box that overlap the box and carry its label.
+  template <class F>
+  void for_each_run(int r, F&& f) const {
+    const Region& reg = regions[r];
+    for (int y = reg.y0; y <= reg.y1; ++y) {
+      const Run* end = runs.data() + row_start[y + 1];
+      const Run* run = std::lower_bound(runs.data() + row_start[y], end, reg.x0,
+                                        [](const Run& a, int x) { return a.x1 <= x; });
+      for (; run != end && run->x0 <= reg.x1; ++run)
+        if (label_region[run->label] == r) f(y, run->x0, run->x1);
+    }
+  }
 };
 
 // Single-pass labelling over runs with union-find; keeps its buffers between frames.
@@ -67,22 +83,14 @@ class RegionLabeller {
   struct Label {
     int root, parent;  // union-find link; label of the region to the left of its first pixel
     int area, x0, y0, x1, y1;
-    int head, tail;    // its run list
-    bool black;
-  };
-  struct RowRun {
-    int x0, x1, label;
     bool black;
   };
   int find(int label);
   int unite(int a, int b);
   int create(bool black, int parent, int y);
-  void add_run(int label, int y, int x0, int x1);
 
   std::vector<Label> labels_;
-  std::vector<RowRun> prev_, cur_;
-  std::vector<int> region_of_, child_fill_;
-  std::vector<Run>* runs_ = nullptr;
+  std::vector<int> child_fill_;
 };
 
 // ---------------------------------------------------------------- candidates.cpp

@@ -49,7 +49,7 @@ void add_detect_command(CLI::App& app, int& status) {
     std::vector<std::string> images;
     std::string families = "3x3,4x4", calibration, debug_dir;
     double fx = NAN, fy = NAN, cx = NAN, cy = NAN, tag_size = 0.1;
-    int window = 16, offset = 0;
+    int window = 16, offset = 4;
     bool stats = false;
   };
   auto opt = std::make_shared<Options>();
@@ -68,7 +68,7 @@ void add_detect_command(CLI::App& app, int& status) {
       ->check(CLI::PositiveNumber);
   cmd->add_option("--threshold-window", opt->window, "Side of the mean window for binarisation (default 16)")
       ->check(CLI::Range(2, 1024));
-  cmd->add_option("--threshold-offset", opt->offset, "Grey levels below the mean for black (default 0)")
+  cmd->add_option("--threshold-offset", opt->offset, "Grey levels below the mean for black (default 4)")
       ->check(CLI::Range(0, 255));
   cmd->add_flag("--stats", opt->stats, "Add the candidate funnel and per-stage times to each object");
   cmd->add_option("--debug-dir", opt->debug_dir,
