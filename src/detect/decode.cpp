@@ -303,16 +303,22 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   const auto better = [](const Decoding& a, const Decoding& b) {
     return a.error != b.error ? a.error < b.error : a.edge_score > b.edge_score;
   };
-  const Decoding best = *std::min_element(tried.begin(), tried.end(), better);
+  Decoding best = *std::min_element(tried.begin(), tried.end(), better);
 
   // tau3, and every digit clear of the midpoint between two positions.
-  if (best.error > params.decode_threshold(f) || best.worst_cell > params.max_cell_residual) return std::nullopt;
+  if (best.error > params.decode_threshold(f) || best.worst_cell > params.max_cell_residual) {
+    best.verdict = Verdict::residual;
+    return best;
+  }
   // Another id that fits almost as well makes the reading a guess.
   for (const Decoding& d : tried)
-    if (d.id != best.id && d.error < params.min_decode_margin * best.error) return std::nullopt;
-  Decoding out = best;
-  out.ink_spread = ink_spread(c, out);
-  return out;
+    if (d.id != best.id && d.error < params.min_decode_margin * best.error) {
+      best.verdict = Verdict::margin;
+      return best;
+    }
+  best.verdict = Verdict::accepted;
+  best.ink_spread = ink_spread(c, best);
+  return best;
 }
 
 }  // namespace lftag::detail

@@ -62,7 +62,8 @@ double DetectionStats::total_ms() const {
 
 DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   frames += o.frames, regions += o.regions, topology += o.topology, area += o.area, geometry += o.geometry;
-  angle += o.angle, collinearity += o.collinearity, decoded += o.decoded;
+  angle += o.angle, collinearity += o.collinearity, residual += o.residual, unambiguous += o.unambiguous;
+  decoded += o.decoded;
   threshold_ms += o.threshold_ms, regions_ms += o.regions_ms, candidates_ms += o.candidates_ms;
   keypoints_ms += o.keypoints_ms, hypotheses_ms += o.hypotheses_ms, decode_ms += o.decode_ms, pose_ms += o.pose_ms;
   return *this;
@@ -136,6 +137,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
     // Of the decodings of the hull's sides, the one whose squares' ink matches the design.
     std::optional<detail::KeyPoints> k;
     std::optional<detail::Decoding> d;
+    std::array<bool, 2> passed{};  // residual, margin: for any side
     for (const detail::KeyPoints& side : sides) {
       if (trace) {
         std::array<cv::Point2d, 4> points;
@@ -144,11 +146,16 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
         trace->hypotheses.emplace_back();
       }
       auto decoded = detail::decode(c, side, image, camera, p, stats, trace ? &trace->hypotheses.back() : nullptr);
-      if (decoded && decoded->ink_spread <= p.max_ink_spread && (!d || decoded->ink_spread < d->ink_spread)) {
+      if (!decoded) continue;
+      passed[0] |= decoded->verdict != detail::Verdict::residual;
+      passed[1] |= decoded->verdict == detail::Verdict::accepted;
+      if (decoded->verdict == detail::Verdict::accepted && decoded->ink_spread <= p.max_ink_spread &&
+          (!d || decoded->ink_spread < d->ink_spread)) {
         d = decoded;
         k = side;
       }
     }
+    stats.residual += passed[0], stats.unambiguous += passed[1];
     if (!d) continue;
     ++stats.decoded;
 

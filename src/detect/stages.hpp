@@ -135,7 +135,12 @@ std::vector<KeyPoints> find_keypoints(const Candidate& c, const DetectorParams& 
 double signed_angle(cv::Point2d a, cv::Point2d b);
 
 // ---------------------------------------------------------------- decode.cpp
+// How a decoding ended: rejected by tau3 or the cell residual bound, rejected because
+// another id fits within the margin, or accepted (the ink check comes after).
+enum class Verdict { residual, margin, accepted };
+
 struct Decoding {
+  Verdict verdict = Verdict::accepted;
   TagId id;
   cv::Matx33d homography;           // units -> undistorted pixels
   std::vector<int> blob_of_cell;    // grid order
@@ -148,8 +153,8 @@ struct Decoding {
   double ink_spread = 0;
 };
 
-// Tries the 16 key point hypotheses and returns the best decoding within tau3 and the
-// cell residual bound, with its ink spread.
+// Tries the 16 key point hypotheses and returns the best one with its verdict and, when
+// accepted, its ink spread; none when no hypothesis could be read at all.
 // `hypotheses`, when not null, receives every hypothesis' projected inner edge.
 // Times the hypotheses and the decoding into `stats`.
 std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const ImageView& image, const Camera& camera,

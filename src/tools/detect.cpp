@@ -35,7 +35,8 @@ nlohmann::json detection_json(const Detection& d) {
 nlohmann::json stats_json(const DetectionStats& s) {
   return {{"funnel",
            {{"regions", s.regions}, {"topology", s.topology}, {"area", s.area}, {"geometry", s.geometry},
-            {"angle", s.angle}, {"collinearity", s.collinearity}, {"decoded", s.decoded}}},
+            {"angle", s.angle}, {"collinearity", s.collinearity}, {"residual", s.residual},
+            {"unambiguous", s.unambiguous}, {"decoded", s.decoded}}},
           {"time_ms",
            {{"threshold", s.threshold_ms}, {"regions", s.regions_ms}, {"candidates", s.candidates_ms},
             {"keypoints", s.keypoints_ms}, {"hypotheses", s.hypotheses_ms}, {"decode", s.decode_ms},
@@ -144,7 +145,7 @@ void add_detect_command(CLI::App& app, int& status) {
     if (opt->stats)
       std::cerr << "lftag detect: " << total.frames << " images, funnel " << total.topology << " -> " << total.area
                 << " -> " << total.geometry << " -> " << total.angle << " -> " << total.collinearity << " -> "
-                << total.decoded << ", mean " << total.total_ms() / std::max<std::int64_t>(1, total.frames)
+                << total.residual << " -> " << total.unambiguous << " -> " << total.decoded << ", mean " << total.total_ms() / std::max<std::int64_t>(1, total.frames)
                 << " ms per image\n";
     if (failed) std::cerr << "lftag detect: " << failed << " of " << opt->images.size() << " images failed\n";
     status = failed ? 1 : 0;

@@ -381,7 +381,9 @@ TEST(Detector, StatsCountTheFunnelAndTraceRecordsTheStages) {
   EXPECT_GE(stats.area, stats.geometry);
   EXPECT_GE(stats.geometry, stats.angle);
   EXPECT_GE(stats.angle, stats.collinearity);
-  EXPECT_GE(stats.collinearity, stats.decoded);
+  EXPECT_GE(stats.collinearity, stats.residual);
+  EXPECT_GE(stats.residual, stats.unambiguous);
+  EXPECT_GE(stats.unambiguous, stats.decoded);
   EXPECT_EQ(stats.decoded, 1);
   EXPECT_GT(stats.total_ms(), 0);
   EXPECT_EQ(trace.binary.size(), cv::Size(640, 480));

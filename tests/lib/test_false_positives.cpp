@@ -62,8 +62,9 @@ TEST(FalsePositives, NoneOnOpenCvPhotosAndVideos) {
   EXPECT_GE(videos, 4);
   EXPECT_GT(count.frames, 2500);
   EXPECT_GT(stats.topology, 1000);  // plenty of candidates reached the later stages
+  EXPECT_GT(stats.collinearity, 100);
   EXPECT_TRUE(count.hits.empty()) << count.hits.size() << " false positives, first: " << count.hits.front();
   std::cout << count.frames << " frames, funnel " << stats.topology << " -> " << stats.area << " -> "
-            << stats.geometry << " -> " << stats.angle << " -> " << stats.collinearity << " -> " << stats.decoded
-            << "\n";
+            << stats.geometry << " -> " << stats.angle << " -> " << stats.collinearity << " -> " << stats.residual
+            << " -> " << stats.unambiguous << " -> " << stats.decoded << "\n";
 }

@@ -135,7 +135,9 @@ struct DetectionStats {
   std::int64_t geometry = 0;           // passed the geometry constraint
   std::int64_t angle = 0;              // passed the angle constraint
   std::int64_t collinearity = 0;       // passed the collinearity constraint
-  std::int64_t decoded = 0;            // passed the residual (tau3) constraint
+  std::int64_t residual = 0;           // decoded within tau3 and the cell residual bound
+  std::int64_t unambiguous = 0;        // no other id fitting within the decoding margin
+  std::int64_t decoded = 0;            // the squares' ink matches the design: detections
   double threshold_ms = 0;             // binarisation
   double regions_ms = 0;               // topological connected components
   double candidates_ms = 0;            // topological filtering and vertex estimation
