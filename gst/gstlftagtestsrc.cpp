@@ -46,6 +46,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include <lftag/render.hpp>
+#include <lftag/tag_id.hpp>
 
 #include "lftagmeta.h"
 #include "markermotion.h"
@@ -303,7 +304,7 @@ gst_lftag_test_src_class_init (GstLFTagTestSrcClass * klass)
           GST_TYPE_LFTAG_TEST_SRC_FAMILY, DEFAULT_PROP_FAMILY, playing));
   g_object_class_install_property (gobject_class, PROP_IDS,
       g_param_spec_string ("ids", "Ids",
-          "Marker ids, comma-separated, decimal or 0x-hexadecimal, ranges such as "
+          "Marker ids, comma-separated without spaces, decimal or 0x-hexadecimal, ranges such as "
           "0-11 allowed, at most 64. Marker i shows the i-th id, the list repeating "
           "when count is larger. Unset: random ids drawn with the seed. An id "
           "outside the family fails the start (later: a warning, markers unchanged)",
@@ -434,7 +435,8 @@ gst_lftag_test_src_set_property (GObject * object, guint prop_id,
     case PROP_IDS:             /* parsed outside the lock; bad text changes nothing */
       try {
         const gchar *text = g_value_get_string (value);
-        ids = lftag::gst::parse_id_list (text ? text : "", MAX_MARKERS);
+        if (text && *text)
+          ids = lftag::parse_id_list (text, MAX_MARKERS);
       } catch (const std::exception & e) {
         g_warning ("%s: ignoring ids \"%s\": %s", GST_OBJECT_NAME (self),
             g_value_get_string (value), e.what ());
@@ -698,6 +700,7 @@ gst_lftag_test_src_set_caps (GstBaseSrc * bsrc, GstCaps * caps)
   try {
     lftag::SceneParams params;
     params.camera = frame_camera (s, st.calibration, width, height);
+    params.noise_sigma = s.noise;
     if (s.background == GST_LFTAG_TEST_SRC_BACKGROUND_GRADIENT) {
       params.exposure = 0.8;    /* keeps the bright side below white */
       params.light_gradient = 0.6;
@@ -875,11 +878,11 @@ gst_lftag_test_src_update_motion (GstLFTagTestSrc * self, const Settings & s)
   return TRUE;
 }
 
-/* The linear grey frame at time t along the paths. Motion blur averages sub-frames
- * across the exposure (which lasts `exposure` along the paths), close enough that no corner moves more than a pixel between two. */
+/* The linear grey frame at time t along the paths, without noise. Motion blur
+ * averages sub-frames across the exposure (which lasts `exposure` along the paths),
+ * close enough that no corner moves more than a pixel between two. */
 static cv::Mat1f
-gst_lftag_test_src_render (const State & st, const Settings & s, double t,
-    double exposure, std::uint64_t noise_seed)
+gst_lftag_test_src_render (const State & st, double t, double exposure)
 {
   int steps = 1;
   if (exposure > 0) {
@@ -900,12 +903,6 @@ gst_lftag_test_src_render (const State & st, const Settings & s, double t,
   }
   if (steps > 1)
     sum /= steps;
-  if (s.noise > 0) {
-    cv::Mat1f noise (sum.size ());
-    cv::RNG rng (noise_seed);
-    rng.fill (noise, cv::RNG::NORMAL, 0.0, s.noise);
-    sum += noise;
-  }
   return sum;
 }
 
@@ -917,9 +914,9 @@ grey_plane (GstVideoFrame * frame)
       std::size_t (GST_VIDEO_FRAME_PLANE_STRIDE (frame, 0)));
 }
 
-/* Quantises the linear frame into the buffer, converting from grey if needed. */
+/* Writes the grey frame into the buffer, converting it if needed. */
 static gboolean
-gst_lftag_test_src_write (GstLFTagTestSrc * self, const cv::Mat1f & linear,
+gst_lftag_test_src_write (GstLFTagTestSrc * self, const cv::Mat1b & image,
     GstBuffer * buffer)
 {
   State & st = *self->state;
@@ -929,10 +926,10 @@ gst_lftag_test_src_write (GstLFTagTestSrc * self, const cv::Mat1f & linear,
     return FALSE;
   if (!st.converter) {
     cv::Mat plane = grey_plane (&frame);
-    linear.convertTo (plane, CV_8U);    /* rounds and saturates, in place */
+    image.copyTo (plane);
   } else if (gst_video_frame_map (&grey, &st.grey_info, st.grey, GST_MAP_READWRITE)) {
     cv::Mat plane = grey_plane (&grey);
-    linear.convertTo (plane, CV_8U);
+    image.copyTo (plane);
     gst_video_converter_frame (st.converter, &grey, &frame);
     gst_video_frame_unmap (&grey);
   } else {
@@ -966,9 +963,15 @@ gst_lftag_test_src_fill (GstPushSrc * psrc, GstBuffer * buffer)
 
   std::vector<lftag::MarkerTruth> truth;
   try {
-    const cv::Mat1f linear = gst_lftag_test_src_render (st, s, t, exposure,
-        lftag::gst::mix_seed (s.seed, pts));
-    if (!gst_lftag_test_src_write (self, linear, buffer)) {
+    /* The renderer adds the noise, so a new noise level needs a new renderer. */
+    if (st.renderer->params ().noise_sigma != s.noise) {
+      lftag::SceneParams params = st.renderer->params ();
+      params.noise_sigma = s.noise;
+      st.renderer.emplace (params);
+    }
+    const cv::Mat1b image = st.renderer->quantize (gst_lftag_test_src_render (st, t,
+            exposure), lftag::gst::mix_seed (s.seed, pts));
+    if (!gst_lftag_test_src_write (self, image, buffer)) {
       GST_ELEMENT_ERROR (self, RESOURCE, WRITE, (nullptr),
           ("could not map the output buffer"));
       return GST_FLOW_ERROR;

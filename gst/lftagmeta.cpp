@@ -237,13 +237,13 @@ GstStructure* detection_structure(const Detection& d) {
   return s;
 }
 
-GstStructure* truth_structure(const MarkerTruth& t, const Camera& camera) {
+GstStructure* truth_structure(const MarkerTruth& t) {
   GstStructure* s = gst_structure_new_empty(LFTAG_TRUTH_STRUCTURE_NAME);
   set_identity(s, t.family, t.id);
   set_points(s, LFTAG_FIELD_KEYPOINTS, t.keypoints);
   set_points(s, LFTAG_FIELD_CENTROIDS, t.centroids);
   set_points(s, LFTAG_FIELD_CORNERS, t.corners);
-  set_point(s, LFTAG_FIELD_CENTER, camera.project({cv::Point3d(0, 0, 0)}, t.rvec, t.tvec)[0]);
+  set_point(s, LFTAG_FIELD_CENTER, t.center);
   set_vec3(s, LFTAG_FIELD_RVEC, t.rvec);
   set_vec3(s, LFTAG_FIELD_TVEC, t.tvec);
   set_points(s, LFTAG_FIELD_CENTERS, t.centers);
@@ -276,7 +276,7 @@ void add_truth_meta(GstBuffer* buffer, const Camera& camera, const std::vector<M
                     G_TYPE_DOUBLE, camera.cy, nullptr);
   set_doubles(s, LFTAG_META_FIELD_DISTORTION, camera.distortion);
   std::vector<GstStructure*> items;
-  for (const MarkerTruth& t : markers) items.push_back(truth_structure(t, camera));
+  for (const MarkerTruth& t : markers) items.push_back(truth_structure(t));
   set_structures(s, LFTAG_META_FIELD_MARKERS, items);
 }
 
@@ -306,6 +306,7 @@ MarkerTruth truth_from_structure(const GstStructure* s) {
   t.centers = get_points(s, LFTAG_FIELD_CENTERS);
   t.centroids = get_points(s, LFTAG_FIELD_CENTROIDS);
   t.corners = get_points(s, LFTAG_FIELD_CORNERS);
+  t.center = get_point(s, LFTAG_FIELD_CENTER);
   t.rvec = get_vec3(s, LFTAG_FIELD_RVEC);
   t.tvec = get_vec3(s, LFTAG_FIELD_TVEC);
   t.tag_size = get_double(s, LFTAG_FIELD_TAG_SIZE);

@@ -22,9 +22,8 @@ const GstMetaInfo* detection_meta_info();
 const GstMetaInfo* truth_meta_info();
 
 // One "lftag/detection" or "lftag/truth" structure (the caller owns it).
-// `camera` projects the truth's marker centre.
 GstStructure* detection_structure(const Detection& detection);
-GstStructure* truth_structure(const MarkerTruth& truth, const Camera& camera);
+GstStructure* truth_structure(const MarkerTruth& truth);
 
 // Sets `field` of `s` to a GstValueArray of detection structures: the "detections"
 // of the meta, and of bus messages.

@@ -36,12 +36,6 @@ std::uint64_t splitmix64(std::uint64_t x) {
   return x ^ (x >> 31);
 }
 
-std::string trim(const std::string& s) {
-  const auto first = s.find_first_not_of(" \t");
-  if (first == std::string::npos) return {};
-  return s.substr(first, s.find_last_not_of(" \t") - first + 1);
-}
-
 }  // namespace
 
 std::uint64_t mix_seed(std::uint64_t seed, std::uint64_t stream) {
@@ -155,30 +149,6 @@ std::vector<TagId> random_ids(const Family& family, std::size_t count, std::uint
     const std::uint64_t high = random.bits() & high_mask;
     const TagId id(high, random.bits() & low_mask);
     if (used.insert(id).second || used.size() >= dictionary) ids.push_back(id);
-  }
-  return ids;
-}
-
-std::vector<TagId> parse_id_list(const std::string& text, std::size_t max_ids) {
-  std::vector<TagId> ids;
-  if (trim(text).empty()) return ids;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    const std::size_t comma = std::min(text.find(',', start), text.size());
-    const std::string item = trim(text.substr(start, comma - start));
-    start = comma + 1;
-    if (item.empty()) throw std::invalid_argument("an item of the list is empty");
-    const std::size_t dash = item.find('-');
-    if (dash == std::string::npos) {
-      ids.push_back(TagId::parse(item));
-    } else {
-      const TagId lo = TagId::parse(trim(item.substr(0, dash))), hi = TagId::parse(trim(item.substr(dash + 1)));
-      if (!lo.fits_u64() || !hi.fits_u64() || hi < lo)
-        throw std::invalid_argument("the range '" + item + "' must run upwards between ids below 2^64");
-      if (hi.low() - lo.low() >= max_ids) throw std::invalid_argument("the range '" + item + "' is too long");
-      for (std::uint64_t id = lo.low(); id <= hi.low(); ++id) ids.emplace_back(id);
-    }
-    if (ids.size() > max_ids) throw std::invalid_argument("more than " + std::to_string(max_ids) + " ids");
   }
   return ids;
 }

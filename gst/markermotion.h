@@ -6,7 +6,6 @@
 #pragma once
 
 #include <cstdint>
-#include <string>
 #include <vector>
 
 #include <lftag/camera.hpp>
@@ -57,9 +56,5 @@ std::uint64_t mix_seed(std::uint64_t seed, std::uint64_t stream);
 
 // `count` ids drawn from `family` with `seed`, distinct unless the family has fewer ids.
 std::vector<TagId> random_ids(const Family& family, std::size_t count, std::uint64_t seed);
-
-// Parses "7", "0x1f", "1,2,5-9" (ranges below 2^64); at most `max_ids` ids. Throws
-// std::invalid_argument saying what is wrong. An empty text is an empty list.
-std::vector<TagId> parse_id_list(const std::string& text, std::size_t max_ids);
 
 }  // namespace lftag::gst

@@ -54,7 +54,7 @@ void expect_equal(const Detection& a, const Detection& b) {
 void expect_equal(const MarkerTruth& a, const MarkerTruth& b) {
   fail_unless(a.family == b.family && a.id == b.id);
   fail_unless(a.keypoints == b.keypoints && a.centers == b.centers && a.centroids == b.centroids);
-  fail_unless(a.corners == b.corners);
+  fail_unless(a.corners == b.corners && a.center == b.center);
   fail_unless(a.rvec == b.rvec && a.tvec == b.tvec && a.tag_size == b.tag_size);
   fail_unless(a.fully_visible == b.fully_visible && a.edge_px == b.edge_px);
 }
@@ -179,13 +179,14 @@ GST_START_TEST(test_truth_round_trip)
   for (std::size_t i = 0; i < truth.size(); ++i) expect_equal(frame->markers[i], truth[i]);
   fail_if(lftag::gst::read_detection_meta(buffer).has_value(), "truth is not detections");
 
-  // The centre is the projection of the marker frame's origin.
+  // The centre is the truth's, the projection of the marker frame's origin.
   const GstStructure* marker = item(meta_structure(buffer, LFTAG_TRUTH_META_NAME), LFTAG_META_FIELD_MARKERS, 0);
   fail_unless(gst_structure_has_name(marker, LFTAG_TRUTH_STRUCTURE_NAME));
   double x, y;
   fail_unless(lftag_structure_get_point(marker, LFTAG_FIELD_CENTER, -1, &x, &y));
+  fail_unless(x == truth[0].center.x && y == truth[0].center.y);
   const cv::Point2d centre = camera.project({cv::Point3d(0, 0, 0)}, truth[0].rvec, truth[0].tvec)[0];
-  fail_unless(x == centre.x && y == centre.y);
+  fail_unless(cv::norm(cv::Point2d(x, y) - centre) < 1e-9);
   gst_buffer_unref(buffer);
 }
 GST_END_TEST;
