@@ -33,42 +33,45 @@ Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, co
   // The blob's window: its box grown by `reach`. In it, each pixel is the blob's own,
   // another black region's, or white; a white pixel counts for the blob when the nearest
   // black pixel within `reach` is the blob's (ties count half). So the anti-aliased edge
-  // of the blob counts and the edges of its neighbours and of the border do not.
+  // of the blob counts and the edges of its neighbours and of the border do not. Pixels
+  // are classified `reach` further out, where the competing black pixels may lie.
   const Region& r = tree.regions[region];
   const int x0 = std::max(0, r.x0 - reach), y0 = std::max(0, r.y0 - reach);
   const int x1 = std::min(image.width - 1, r.x1 + reach), y1 = std::min(image.height - 1, r.y1 + reach);
-  const int w = x1 - x0 + 1, h = y1 - y0 + 1;
+  const int cx0 = std::max(0, x0 - reach), cy0 = std::max(0, y0 - reach);
+  const int cx1 = std::min(image.width - 1, x1 + reach), cy1 = std::min(image.height - 1, y1 + reach);
+  const int w = cx1 - cx0 + 1, h = cy1 - cy0 + 1;
   enum : std::uint8_t { kWhite = 0, kOwn = 1, kOther = 2 };
   thread_local std::vector<std::uint8_t> cls;
   cls.assign(std::size_t(w) * h, kWhite);
-  for (int y = y0; y <= y1; ++y)
-    for (int x = x0; x <= x1; ++x)
-      if (binary.black(x, y)) cls[std::size_t(y - y0) * w + (x - x0)] = kOther;
+  for (int y = cy0; y <= cy1; ++y)
+    for (int x = cx0; x <= cx1; ++x)
+      if (binary.black(x, y)) cls[std::size_t(y - cy0) * w + (x - cx0)] = kOther;
   tree.for_each_run(region, [&](int y, int rx0, int rx1) {
-    std::fill_n(cls.begin() + std::size_t(y - y0) * w + (rx0 - x0), rx1 - rx0, kOwn);
+    std::fill_n(cls.begin() + std::size_t(y - cy0) * w + (rx0 - cx0), rx1 - rx0, kOwn);
   });
 
   const int limit = reach * reach;  // a Euclidean radius: twice as accurate at 1 px per unit as the L-infinity ring
   double m = 0, mx = 0, my = 0;
   for (int y = y0; y <= y1; ++y) {
     const std::uint8_t* row = image.data + y * image.stride;
-    const std::uint8_t* c = cls.data() + std::size_t(y - y0) * w;
+    const std::uint8_t* c = cls.data() + std::size_t(y - cy0) * w;
     for (int x = x0; x <= x1; ++x) {
       double share = 0;
-      if (c[x - x0] == kOwn) {
+      if (c[x - cx0] == kOwn) {
         share = 1;
-      } else if (c[x - x0] == kWhite) {
+      } else if (c[x - cx0] == kWhite) {
         int own = limit + 1, other = limit + 1;
         for (int dy = -reach; dy <= reach; ++dy) {
           const int yy = y + dy;
-          if (yy < y0 || yy > y1) continue;
-          const std::uint8_t* cc = cls.data() + std::size_t(yy - y0) * w;
+          if (yy < cy0 || yy > cy1) continue;
+          const std::uint8_t* cc = cls.data() + std::size_t(yy - cy0) * w;
           for (int dx = -reach; dx <= reach; ++dx) {
             const int xx = x + dx;
-            if (xx < x0 || xx > x1) continue;
+            if (xx < cx0 || xx > cx1) continue;
             const int d2 = dx * dx + dy * dy;
-            if (cc[xx - x0] == kOwn) own = std::min(own, d2);
-            else if (cc[xx - x0] == kOther) other = std::min(other, d2);
+            if (cc[xx - cx0] == kOwn) own = std::min(own, d2);
+            else if (cc[xx - cx0] == kOther) other = std::min(other, d2);
           }
         }
         share = own > limit ? 0.0 : own < other ? 1.0 : own == other ? 0.5 : 0.0;

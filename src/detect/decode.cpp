@@ -48,6 +48,9 @@ std::optional<cv::Matx33d> fit_homography(const std::vector<cv::Point2d>& from, 
   const Eigen::Matrix<double, 8, 1> h = ata.ldlt().solve(atb);
   if (!h.allFinite()) return std::nullopt;
   const cv::Matx33d hn(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
+  // In normalised coordinates a homography between two spread point sets has a determinant
+  // near 1; collinear or coincident points leave it (near) singular.
+  if (!(std::abs(cv::determinant(hn)) > 1e-6)) return std::nullopt;
   return tt.inv() * hn * tf;
 }
 

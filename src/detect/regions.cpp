@@ -50,7 +50,8 @@ void RegionLabeller::label(const BinaryImage& bin, RegionTree& tree) {
   labels_.clear();
   tree.runs.clear();
   tree.row_start.assign(1, 0);
-  create(false, -1, 0);  // the white frame around the image
+  create(false, -1, 0);  // the white frame around the image: its box grows from nothing
+  labels_[kFrame].y0 = 1 << 30;
 
   std::size_t prev_begin = 0, prev_end = 0;  // the row above, in tree.runs
   bool prev_first_black = false;
@@ -120,7 +121,8 @@ void RegionLabeller::label(const BinaryImage& bin, RegionTree& tree) {
     Region r;
     r.black = s.black;
     r.area = s.area;
-    r.x0 = s.area ? s.x0 : 0, r.y0 = s.y0, r.x1 = s.x1, r.y1 = s.y1;
+    if (s.area) r.x0 = s.x0, r.y0 = s.y0, r.x1 = s.x1, r.y1 = s.y1;
+    else r.x0 = r.y0 = 0, r.x1 = r.y1 = -1;  // a frame without pixels: an empty box
     tree.regions.push_back(r);
   }
   for (int l = 0; l < int(labels_.size()); ++l) tree.label_region[l] = tree.label_region[find(l)];

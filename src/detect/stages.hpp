@@ -148,8 +148,8 @@ struct Decoding {
   double edge_score = 0;            // mean Sobel magnitude along the inner border edge
   double worst_cell = 0;            // largest distance of a centroid from its cell's position, units
   // Spread of the squares' ink per unit of design area (largest / smallest) under the
-  // homography fitted to all n^2 blobs: about 1 for the marker's true turn, at least
-  // (16/9)^2 when the baseline is taken on another side.
+  // homography fitted to all n^2 blobs: about 1 for the marker's true turn, about 2 to 3
+  // when the baseline is taken on another side.
   double ink_spread = 0;
 };
 

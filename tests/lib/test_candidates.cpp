@@ -282,8 +282,6 @@ TEST(MeasureBlob, RingPixelsNearerAnotherBlobDoNotCount) {
 }
 
 TEST(MeasureBlob, TiesAndNearerBlobsAcrossTheWindowEdge) {
-  GTEST_SKIP() << "library bug: measure_blob ignores black pixels outside the blob's box grown by reach, "
-                  "so ring pixels tied with (or nearer to) a neighbour beyond it count whole";
   // Two bars one white pixel apart: the gap pixel (3, 1) is one pixel from each, so each
   // bar gets half of it, as in RingPixelsGoToTheNearestBlobAndTiesCountHalf; here the other
   // bar lies just outside the measured bar's window.

@@ -423,8 +423,6 @@ TEST(Regions, FrameHoldsEverythingOnTheBorder) {
 }
 
 TEST(Regions, FrameBoundingBoxIsThatOfItsPixels) {
-  GTEST_SKIP() << "library bug: the frame's y0 is always 0, even when row 0 holds no frame pixel "
-                  "(regions.cpp: create(false, -1, 0))";
   // Row 0 black: the frame's pixels start on row 1, so its box is (0, 1) - (4, 3).
   const Labelled l = label(from_rows({"#####", ".....", ".###.", "....."}));
   const Region& f = l.tree.regions[kFrame];

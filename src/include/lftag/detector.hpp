@@ -40,7 +40,7 @@ struct ImageView {
 
 // The grey level that weighs zero when blob centroids are taken from the inverted image.
 enum class CentroidReference {
-  local_white,  // the mean grey of the marker's white region: the paper's inversion, but
+  local_white,  // the upper quartile of the marker's white region: the paper's inversion, but
                 // white paper around a blob weighs nothing, which keeps small blobs' centroids
                 // from snapping to the pixel grid
   full_scale,   // 255, the paper's plain inversion
@@ -88,8 +88,9 @@ struct DetectorParams {
   double min_decode_margin = 2.0;
   // The squares' ink per unit of design area, largest over smallest, under the decoded
   // homography: at most 1.24 for true markers in our renders, from 3 m to the range limit,
-  // tilted or blurred; 16/9 when one square has the wrong size, and at least
-  // (16/9)^2 = 3.2 when the baseline is taken on a wrong side. This settles the turn.
+  // tilted or blurred; 16/9 when one square has the wrong size, and about 2 to 3 when the
+  // baseline is taken on a wrong side (a data square in a baseline's place and the other
+  // way round). This settles the turn.
   double max_ink_spread = 1.5;
 
   // -- Pose.
