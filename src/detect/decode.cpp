@@ -87,33 +87,33 @@ cv::Vec2d sobel(const ImageView& im, int x, int y) {
   return {double(gx), double(gy)};
 }
 
-// Sobel gradient magnitude at a sub-pixel point, bilinear between pixel gradients.
-double gradient_at(const ImageView& im, cv::Point2d p) {
+// `value(x, y)` at a sub-pixel point, bilinear between the four pixels around it (the
+// point clamped into the image).
+template <class Value>
+auto bilinear(const ImageView& im, cv::Point2d p, Value value) {
   const double x = std::clamp(p.x, 0.0, im.width - 1.0), y = std::clamp(p.y, 0.0, im.height - 1.0);
   const int x0 = std::clamp(int(x), 0, std::max(0, im.width - 2));
   const int y0 = std::clamp(int(y), 0, std::max(0, im.height - 2));
   const int x1 = std::min(x0 + 1, im.width - 1), y1 = std::min(y0 + 1, im.height - 1);
   const double fx = x - x0, fy = y - y0;
-  const cv::Vec2d g = (1 - fx) * (1 - fy) * sobel(im, x0, y0) + fx * (1 - fy) * sobel(im, x1, y0) +
-                      (1 - fx) * fy * sobel(im, x0, y1) + fx * fy * sobel(im, x1, y1);
+  return (1 - fx) * (1 - fy) * value(x0, y0) + fx * (1 - fy) * value(x1, y0) + (1 - fx) * fy * value(x0, y1) +
+         fx * fy * value(x1, y1);
+}
+
+// Sobel gradient magnitude at a sub-pixel point, bilinear between pixel gradients.
+double gradient_at(const ImageView& im, cv::Point2d p) {
+  const cv::Vec2d g = bilinear(im, p, [&](int x, int y) { return sobel(im, x, y); });
   return std::hypot(g[0], g[1]);
+}
+
+double grey_at(const ImageView& im, cv::Point2d p) {
+  return bilinear(im, p, [&](int x, int y) { return double(im.data[y * im.stride + x]); });
 }
 
 std::vector<cv::Point2d> square(double a, double b) {
   return {cv::Point2d(a, a), cv::Point2d(b, a), cv::Point2d(b, b), cv::Point2d(a, b)};
 }
 
-// Bilinear grey level at a sub-pixel point.
-double grey_at(const ImageView& im, cv::Point2d p) {
-  const double x = std::clamp(p.x, 0.0, im.width - 1.0), y = std::clamp(p.y, 0.0, im.height - 1.0);
-  const int x0 = std::clamp(int(x), 0, std::max(0, im.width - 2));
-  const int y0 = std::clamp(int(y), 0, std::max(0, im.height - 2));
-  const int x1 = std::min(x0 + 1, im.width - 1), y1 = std::min(y0 + 1, im.height - 1);
-  const double fx = x - x0, fy = y - y0;
-  const std::uint8_t* r0 = im.data + y0 * im.stride;
-  const std::uint8_t* r1 = im.data + y1 * im.stride;
-  return (1 - fx) * (1 - fy) * r0[x0] + fx * (1 - fy) * r0[x1] + (1 - fx) * fy * r1[x0] + fx * fy * r1[x1];
-}
 
 // For 2x2, where the four blobs fix the homography and leave no residual: the fraction of
 // (should-be-white, should-be-black) sample pairs whose grey levels are in the wrong order.

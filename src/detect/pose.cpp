@@ -7,25 +7,10 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include "../core/geometry.hpp"
 #include "stages.hpp"
 
 namespace lftag::detail {
-namespace {
-
-// Area centroid of a quadrilateral.
-cv::Point2d polygon_centroid(const std::vector<cv::Point2d>& poly) {
-  double a = 0, cx = 0, cy = 0;
-  for (std::size_t i = 0; i < poly.size(); ++i) {
-    const cv::Point2d& p = poly[i];
-    const cv::Point2d& q = poly[(i + 1) % poly.size()];
-    const double cross = p.x * q.y - q.x * p.y;
-    a += cross, cx += (p.x + q.x) * cross, cy += (p.y + q.y) * cross;
-  }
-  return {cx / (3 * a), cy / (3 * a)};
-}
-
-}  // namespace
-
 bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,
                    Detection& out) {
   const Family& f = c.family;

@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "lftag/render.hpp"
+#include "../core/geometry.hpp"
 
 namespace lftag {
 namespace {
@@ -139,6 +140,17 @@ void draw_target(const SceneTarget& t, const cv::Mat2f& rays, int supersample, c
 
 }  // namespace
 
+cv::Vec3d rotation_from_angles(double roll_deg, double tilt_deg, double pan_deg) {
+  const double d = CV_PI / 180;
+  cv::Matx33d roll, tilt, pan;
+  cv::Rodrigues(cv::Vec3d(0, 0, roll_deg * d), roll);
+  cv::Rodrigues(cv::Vec3d(tilt_deg * d, 0, 0), tilt);
+  cv::Rodrigues(cv::Vec3d(0, pan_deg * d, 0), pan);
+  cv::Vec3d r;
+  cv::Rodrigues(pan * tilt * roll, r);
+  return r;
+}
+
 SceneTarget to_target(const SceneMarker& m) {
   if (!(m.tag_size > 0)) throw std::invalid_argument("the tag size must be positive");
   if (!(m.margin_units >= 0) || m.margin_units != std::floor(m.margin_units))
@@ -168,22 +180,11 @@ MarkerTruth make_truth(const Camera& camera, const SceneMarker& m) {
   for (const UnitRect& r : m.family.black_squares(m.id)) {
     std::vector<cv::Point2d> outline;
     const int steps = 16;
-    for (int i = 0; i < steps; ++i) {
-      const double f = double(i) / steps;
-      outline.emplace_back(r.x + r.width * f, r.y);
-    }
+    for (int i = 0; i < steps; ++i) outline.emplace_back(r.x + r.width * double(i) / steps, r.y);
     for (int i = 0; i < steps; ++i) outline.emplace_back(r.x + r.width, r.y + r.height * double(i) / steps);
     for (int i = 0; i < steps; ++i) outline.emplace_back(r.x + r.width * (1 - double(i) / steps), r.y + r.height);
     for (int i = 0; i < steps; ++i) outline.emplace_back(r.x, r.y + r.height * (1 - double(i) / steps));
-    const std::vector<cv::Point2d> poly = project(outline);
-    double a = 0, cx = 0, cy = 0;
-    for (std::size_t i = 0; i < poly.size(); ++i) {
-      const cv::Point2d& p = poly[i];
-      const cv::Point2d& q = poly[(i + 1) % poly.size()];
-      const double cross = p.x * q.y - q.x * p.y;
-      a += cross, cx += (p.x + q.x) * cross, cy += (p.y + q.y) * cross;
-    }
-    t.centroids.emplace_back(cx / (3 * a), cy / (3 * a));
+    t.centroids.push_back(detail::polygon_centroid(project(outline)));
   }
   t.corners = project({oc.begin(), oc.end()});
   t.center = project({cv::Point2d(m.family.side() / 2.0, m.family.side() / 2.0)})[0];

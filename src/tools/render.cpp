@@ -15,19 +15,6 @@
 namespace lftag::tools {
 namespace {
 
-// Rotation of the marker relative to a fronto-parallel, upright pose:
-// pan about the camera's y axis, tilt about its x axis, roll in the marker plane.
-cv::Vec3d rotation(double roll_deg, double tilt_deg, double pan_deg) {
-  const double d = CV_PI / 180;
-  cv::Matx33d rz, rx, ry;
-  cv::Rodrigues(cv::Vec3d(0, 0, roll_deg * d), rz);
-  cv::Rodrigues(cv::Vec3d(tilt_deg * d, 0, 0), rx);
-  cv::Rodrigues(cv::Vec3d(0, pan_deg * d, 0), ry);
-  cv::Vec3d rvec;
-  cv::Rodrigues(ry * rx * rz, rvec);
-  return rvec;
-}
-
 cv::Vec3d vec3(const nlohmann::json& j, const char* name) {
   if (!j.is_array() || j.size() != 3) throw std::invalid_argument(std::string("'") + name + "' must be [x, y, z]");
   return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()};
@@ -54,7 +41,7 @@ std::vector<SceneMarker> read_scene(const std::string& path) {
     s.tag_size = m.value("tag_size", 1.0);
     s.tvec = vec3(m.at("tvec"), "tvec");
     s.rvec = m.contains("rvec") ? vec3(m["rvec"], "rvec")
-                                : rotation(m.value("roll", 0.0), m.value("tilt", 0.0), m.value("pan", 0.0));
+                                : rotation_from_angles(m.value("roll", 0.0), m.value("tilt", 0.0), m.value("pan", 0.0));
     markers.push_back(s);
   }
   return markers;
@@ -155,7 +142,7 @@ void add_render_command(CLI::App& app, int& status) {
         m.family.require(m.id);
         m.tag_size = opt->tag_size;
         m.tvec = {opt->x, opt->y, opt->distance};
-        m.rvec = rotation(opt->roll, opt->tilt, opt->pan);
+        m.rvec = rotation_from_angles(opt->roll, opt->tilt, opt->pan);
         markers.push_back(m);
       }
       for (SceneMarker& m : markers) m.margin_units = opt->margin;

@@ -10,18 +10,7 @@
 
 namespace lftag::test {
 
-// Rotation vector of a marker turned `roll` degrees in its plane, then tilted about the
-// camera's x axis and panned about its y axis (degrees).
-inline cv::Vec3d rotation(double roll, double tilt, double pan) {
-  const double d = CV_PI / 180;
-  cv::Matx33d rz, rx, ry;
-  cv::Rodrigues(cv::Vec3d(0, 0, roll * d), rz);
-  cv::Rodrigues(cv::Vec3d(tilt * d, 0, 0), rx);
-  cv::Rodrigues(cv::Vec3d(0, pan * d, 0), ry);
-  cv::Vec3d r;
-  cv::Rodrigues(ry * rx * rz, r);
-  return r;
-}
+inline cv::Vec3d rotation(double roll, double tilt, double pan) { return rotation_from_angles(roll, tilt, pan); }
 
 inline TagId random_id(const Family& f, std::mt19937_64& rng) {
   TagId id;

@@ -82,16 +82,7 @@ std::optional<Prepared> prepare_raster(const Family& f, TagId id, double ppu) {
   return prepare(image, f, Camera::default_for(image.cols, image.rows), 128, k, c);
 }
 
-cv::Vec3d rotation(double roll, double tilt, double pan) {
-  const double d = CV_PI / 180;
-  cv::Matx33d rz, rx, ry;
-  cv::Rodrigues(cv::Vec3d(0, 0, roll * d), rz);
-  cv::Rodrigues(cv::Vec3d(tilt * d, 0, 0), rx);
-  cv::Rodrigues(cv::Vec3d(0, pan * d, 0), ry);
-  cv::Vec3d r;
-  cv::Rodrigues(ry * rx * rz, r);
-  return r;
-}
+cv::Vec3d rotation(double roll, double tilt, double pan) { return rotation_from_angles(roll, tilt, pan); }
 
 // A marker about `pixels` across in a 640x480 frame, tilted, optionally through a lens.
 std::optional<Prepared> prepare_scene(const Family& f, TagId id, double roll, double tilt, double pan, double pixels,

@@ -10,6 +10,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "lftag/render.hpp"
+#include "scenes.hpp"
 #include "stages.hpp"
 
 using namespace lftag;
@@ -19,25 +20,9 @@ using lftag::detail::KeyPoints;
 
 namespace {
 
-cv::Vec3d rotation(double roll, double tilt, double pan) {
-  const double d = CV_PI / 180;
-  cv::Matx33d rz, rx, ry;
-  cv::Rodrigues(cv::Vec3d(0, 0, roll * d), rz);
-  cv::Rodrigues(cv::Vec3d(tilt * d, 0, 0), rx);
-  cv::Rodrigues(cv::Vec3d(0, pan * d, 0), ry);
-  cv::Vec3d r;
-  cv::Rodrigues(ry * rx * rz, r);
-  return r;
-}
+using lftag::test::rotation;
+using lftag::test::rotation_error_deg;
 
-double rotation_error_deg(const cv::Vec3d& a, const cv::Vec3d& b) {
-  cv::Matx33d ra, rb;
-  cv::Rodrigues(a, ra);
-  cv::Rodrigues(b, rb);
-  cv::Vec3d d;
-  cv::Rodrigues(ra.t() * rb, d);
-  return cv::norm(d) * 180 / CV_PI;
-}
 
 struct Case {
   int n;

@@ -66,6 +66,11 @@ struct SceneTarget {
   cv::Vec3d rvec, tvec;
 };
 
+// The rotation vector (marker frame -> camera frame) of a marker that faces the camera
+// upright, turned `roll` degrees in its own plane, then tilted `tilt` degrees about the
+// camera's x axis and panned `pan` degrees about its y axis.
+cv::Vec3d rotation_from_angles(double roll_deg, double tilt_deg, double pan_deg);
+
 // An LFTag marker as a scene target: `margin_units` of white paper around the border.
 struct SceneMarker {
   Family family{3};
