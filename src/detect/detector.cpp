@@ -3,6 +3,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <opencv2/imgproc.hpp>
+
 #include "stages.hpp"
 
 namespace lftag {
@@ -42,6 +44,7 @@ void DetectorParams::validate() const {
   if (families.empty()) fail("no marker family to detect");
   if (threshold_window < 2 || threshold_window > 1024) fail("threshold window must be 2 to 1024 pixels");
   if (threshold_offset < 0 || threshold_offset > 255) fail("threshold offset must be 0 to 255");
+  if (upsample != 1 && upsample != 2) fail("upsample must be 1 or 2");
   if (!(noise_fraction >= 0 && noise_fraction < 1)) fail("noise fraction must be in [0, 1)");
   if (max_extra_children < 0 || max_extra_children > 64) fail("extra children must be 0 to 64");
   if (dilation < 0 || dilation > 8) fail("dilation must be 0 to 8 pixels");
@@ -71,6 +74,7 @@ DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
 
 struct Detector::Impl {
   DetectorParams params;
+  cv::Mat upsampled;
   cv::Mat mean;
   detail::BinaryImage binary;
   detail::RegionLabeller labeller;
@@ -110,10 +114,18 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   if (image.empty()) throw std::invalid_argument("the image is empty (" + std::to_string(image.width) + "x" +
                                                  std::to_string(image.height) + ")");
   const DetectorParams& p = s.params;
-  const Camera& camera = s.camera_for(image.width, image.height);
-
   auto start = Clock::now();
-  detail::threshold_mean(image, p.threshold_window, p.threshold_offset, s.mean, s.binary);
+  // In the enlarged frame everything runs as usual, with a camera of twice the
+  // resolution; the results come back to the frame's pixels at the end.
+  const int up = p.upsample;
+  ImageView work = image;
+  if (up > 1) {
+    cv::resize(image.mat(), s.upsampled, cv::Size(), up, up, cv::INTER_CUBIC);
+    work = ImageView(s.upsampled);
+  }
+  const Camera& native = s.camera_for(image.width, image.height);  // its size is the frame's
+  const Camera camera = up > 1 ? native.for_frame(work.width, work.height) : native;
+  detail::threshold_mean(work, p.threshold_window * up, p.threshold_offset, s.mean, s.binary);
   stats.threshold_ms = elapsed_ms(start);
   if (trace) trace->binary = s.binary.to_mat();
 
@@ -122,7 +134,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   stats.regions_ms = elapsed_ms(start);
 
   start = Clock::now();
-  detail::find_candidates(s.tree, s.binary, image, p, camera, s.candidates, stats);
+  detail::find_candidates(s.tree, s.binary, work, p, camera, s.candidates, stats);
   stats.candidates_ms = elapsed_ms(start);
 
   for (const detail::Candidate& c : s.candidates) {
@@ -145,7 +157,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
         trace->keypoints.push_back(points);
         trace->hypotheses.emplace_back();
       }
-      auto decoded = detail::decode(c, side, image, camera, p, stats, trace ? &trace->hypotheses.back() : nullptr);
+      auto decoded = detail::decode(c, side, work, camera, p, stats, trace ? &trace->hypotheses.back() : nullptr);
       if (!decoded) continue;
       passed[0] |= decoded->verdict != detail::Verdict::residual;
       passed[1] |= decoded->verdict == detail::Verdict::accepted;
@@ -172,6 +184,26 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
     const bool posed = detail::estimate_pose(c, *d, camera, p, det);
     stats.pose_ms += elapsed_ms(start);
     if (posed) found.push_back(std::move(det));
+  }
+  if (up > 1) {
+    const auto back = [up](cv::Point2d& q) { q = (q + cv::Point2d(0.5, 0.5)) / up - cv::Point2d(0.5, 0.5); };
+    for (Detection& d : found) {
+      for (cv::Point2d& q : d.centroids) back(q);
+      for (cv::Point2d& q : d.keypoints) back(q);
+      for (cv::Point2d& q : d.corners) back(q);
+      back(d.center);
+      d.reprojection_error /= up;
+    }
+    if (trace) {
+      for (auto& blobs : trace->candidates)
+        for (cv::Point2d& q : blobs) back(q);
+      for (auto& k : trace->keypoints)
+        for (cv::Point2d& q : k) back(q);
+      for (auto& candidate : trace->hypotheses)
+        for (auto& outline : candidate)
+          for (cv::Point2d& q : outline) back(q);
+      cv::resize(trace->binary, trace->binary, cv::Size(image.width, image.height), 0, 0, cv::INTER_NEAREST);
+    }
   }
   if (trace) trace->detections = found;
   if (stats_out) *stats_out += stats;

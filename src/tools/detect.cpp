@@ -50,7 +50,7 @@ void add_detect_command(CLI::App& app, int& status) {
     std::vector<std::string> images;
     std::string families = "3x3,4x4", calibration, debug_dir;
     double fx = NAN, fy = NAN, cx = NAN, cy = NAN, tag_size = 0.1;
-    int window = 16, offset = 4;
+    int window = 16, offset = 4, upsample = 1;
     bool stats = false;
   };
   auto opt = std::make_shared<Options>();
@@ -71,6 +71,9 @@ void add_detect_command(CLI::App& app, int& status) {
       ->check(CLI::Range(2, 1024));
   cmd->add_option("--threshold-offset", opt->offset, "Grey levels below the mean for black (default 4)")
       ->check(CLI::Range(0, 255));
+  cmd->add_option("--upsample", opt->upsample,
+                  "1, or 2 to detect on the image enlarged twice: farther and steeper markers, 4x the time")
+      ->check(CLI::IsMember({1, 2}));
   cmd->add_flag("--stats", opt->stats, "Add the candidate funnel and per-stage times to each object");
   cmd->add_option("--debug-dir", opt->debug_dir,
                   "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
@@ -81,6 +84,7 @@ void add_detect_command(CLI::App& app, int& status) {
       base.tag_size = opt->tag_size;
       base.threshold_window = opt->window;
       base.threshold_offset = opt->offset;
+      base.upsample = opt->upsample;
       if (!opt->calibration.empty()) {
         base.camera = Camera::load(opt->calibration);
       } else if (!std::isnan(opt->fx)) {

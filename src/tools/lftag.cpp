@@ -14,6 +14,11 @@ int main(int argc, char** argv) {
   lftag::tools::add_generate_command(app, status);
   lftag::tools::add_render_command(app, status);
   lftag::tools::add_detect_command(app, status);
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help exits 0; every mistake in the options exits 2, whatever CLI11 calls it.
+    return app.exit(e) == 0 ? 0 : 2;
+  }
   return status;
 }

@@ -165,6 +165,9 @@ TEST(Cli, DetectRejectsBadConfiguration) {
   r = run("detect --calibration /nonexistent.yml x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("/nonexistent.yml"), std::string::npos) << r.output;
+  r = run("detect --upsample 3 x.png");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.output.find("--upsample"), std::string::npos) << r.output;
   r = run("detect --cx 100 x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("need --fx"), std::string::npos) << r.output;

@@ -104,6 +104,38 @@ TEST(Detector, PaperSetUp3x3At20Metres4x4At16Metres) {
   }
 }
 
+TEST(Detector, FarModeReachesFurtherInTheFramesOwnPixels) {
+  // Enlarged twice, 3x3 markers decode at 22 m (13 px across) where the plain frame loses a
+  // third of them; centroids and poses come back in the frame's own pixels.
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(-1, 1);
+  DetectorParams params;
+  params.families = {Family(3)};
+  params.camera = paper_camera();
+  params.tag_size = 1.0;
+  params.upsample = 2;
+  Detector detector(params);
+  Outcome o;
+  for (int trial = 0; trial < 30; ++trial) {
+    SceneParams p;
+    p.camera = paper_camera();
+    p.supersample = 16;
+    SceneMarker m;
+    m.id = random_id(m.family, rng);
+    m.tvec = {0.05 * u(rng), 0.05 * u(rng), 22.0};
+    m.rvec = rotation(180 * u(rng), 0, 0);
+    const RenderedScene scene = render_scene(p, {m});
+    score(detector, scene, o);
+    for (const Detection& d : detector.detect(ImageView(scene.image))) {
+      for (int g = 0; g < 9; ++g) EXPECT_LT(cv::norm(d.centroids[g] - scene.truth[0].centroids[g]), 0.2);
+      EXPECT_LT(cv::norm(d.center - scene.truth[0].center), 0.3);
+      EXPECT_NEAR(d.tvec[2], 22.0, 1.5);
+    }
+  }
+  EXPECT_EQ(o.right, 30);
+  EXPECT_EQ(o.wrong, 0);
+}
+
 TEST(Detector, PoseWithinOneDegreeAndOnePercent) {
   // A 100 px marker at moderate tilt, without and with lens distortion.
   for (bool distorted : {false, true}) {
@@ -407,6 +439,7 @@ TEST(Detector, ParametersAreValidated) {
   invalid([](DetectorParams& p) { p.families.clear(); });
   invalid([](DetectorParams& p) { p.threshold_window = 1; });
   invalid([](DetectorParams& p) { p.threshold_offset = 300; });
+  invalid([](DetectorParams& p) { p.upsample = 3; });
   invalid([](DetectorParams& p) { p.max_area_ratio = 0.5; });
   invalid([](DetectorParams& p) { p.max_decode_error[3] = -1; });
   invalid([](DetectorParams& p) { p.tag_size = 0; });
