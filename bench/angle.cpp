@@ -47,7 +47,8 @@ bool run_angle(const Options& options) {
         [&](int step, int m) {
           std::mt19937_64 rng = seeded(options.seed, {0xa691e, std::uint64_t(step), std::uint64_t(m)});
           const double roll = std::uniform_real_distribution<double>(0, 360)(rng);
-          const Pose pose = place(camera, jittered_center(camera, rng), kDistance, rotation(roll, angles[step]));
+          const cv::Vec3d rvec = lftag::rotation_from_angles(roll, angles[step], 0);
+          const Pose pose = place(camera, jittered_center(camera, rng), kDistance, rvec);
           return run_trial(system, renderer, ids[m], 1.0, pose);
         },
         after_empty_steps(plan.empty_steps));

@@ -45,7 +45,8 @@ bool run_check(const Options& options) {
     for (std::size_t m = 0; m < ids[s].size(); ++m) {
       std::mt19937_64 rng = seeded(options.seed, {0xc4ec, m});
       const double roll = std::uniform_real_distribution<double>(0, 360)(rng);
-      const Pose pose = place(camera, jittered_center(camera, rng), kDistance, rotation(roll, kTilt));
+      const cv::Vec3d rvec = lftag::rotation_from_angles(roll, kTilt, 0);
+      const Pose pose = place(camera, jittered_center(camera, rng), kDistance, rvec);
       const Outcome o = run_trial(system, renderer, ids[s][m], 1.0, pose);
       outcomes[s].push_back(o);
       const std::string what = "marker " + ids[s][m] + ": ";

@@ -61,8 +61,8 @@ bool run_pose(const Options& options) {
       for (std::size_t m = 0; m < ids[s].size(); ++m) {
         std::mt19937_64 rng = seeded(options.seed, {0x905e, c, m});
         const double roll = std::uniform_real_distribution<double>(0, 360)(rng);
-        const Pose pose =
-            place(camera, jittered_center(camera, rng), cases[c].distance, rotation(roll, cases[c].tilt));
+        const cv::Vec3d rvec = lftag::rotation_from_angles(roll, cases[c].tilt, 0);
+        const Pose pose = place(camera, jittered_center(camera, rng), cases[c].distance, rvec);
         outcomes.push_back(run_trial(system, renderer, ids[s][m], 1.0, pose));
       }
       results[s].push_back(std::move(outcomes));

@@ -46,7 +46,8 @@ bool run_range(const Options& options) {
         [&](int step, int m) {
           std::mt19937_64 rng = seeded(options.seed, {0x4a46e, std::uint64_t(step), std::uint64_t(m)});
           const double roll = std::uniform_real_distribution<double>(0, 360)(rng);
-          const Pose pose = place(camera, jittered_center(camera, rng), distances[step], rotation(roll, 0));
+          const cv::Vec3d rvec = lftag::rotation_from_angles(roll, 0, 0);
+          const Pose pose = place(camera, jittered_center(camera, rng), distances[step], rvec);
           return run_trial(system, renderer, ids[m], 1.0, pose);
         },
         after_empty_steps(plan.empty_steps));

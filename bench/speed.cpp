@@ -68,7 +68,7 @@ std::vector<Frame> scene_frames(const std::vector<std::unique_ptr<FiducialSystem
       const double edge = (0.35 + 0.2 * unit(rng)) * std::min(cell_w, cell_h);
       const cv::Point2d center((cell % cols + 0.4 + 0.2 * unit(rng)) * cell_w,
                                (cell / cols + 0.4 + 0.2 * unit(rng)) * cell_h);
-      const cv::Vec3d rvec = rotation(360 * unit(rng), 60 * unit(rng) - 30, 60 * unit(rng) - 30);
+      const cv::Vec3d rvec = lftag::rotation_from_angles(360 * unit(rng), 60 * unit(rng) - 30, 60 * unit(rng) - 30);
       const Pose pose = place(params.camera, center, params.camera.fx * kTagSize / edge, rvec);
       targets.push_back(system->target(id, kTagSize, pose.rvec, pose.tvec));
       frame.markers[family] = {id, pose};

@@ -9,17 +9,6 @@ namespace bench {
 
 lftag::Camera paper_camera() { return lftag::Camera::pinhole(320, 320, 319.5, 239.5, 640, 480); }
 
-cv::Vec3d rotation(double roll_deg, double tilt_deg, double pan_deg) {
-  const double d = CV_PI / 180;
-  cv::Matx33d rz, rx, ry;
-  cv::Rodrigues(cv::Vec3d(0, 0, roll_deg * d), rz);
-  cv::Rodrigues(cv::Vec3d(tilt_deg * d, 0, 0), rx);
-  cv::Rodrigues(cv::Vec3d(0, pan_deg * d, 0), ry);
-  cv::Vec3d rvec;
-  cv::Rodrigues(ry * rx * rz, rvec);
-  return rvec;
-}
-
 Pose place(const lftag::Camera& camera, cv::Point2d center, double distance, const cv::Vec3d& rvec) {
   const cv::Point2d ideal = camera.undistort({center})[0];
   const double x = (ideal.x - camera.cx) / camera.fx, y = (ideal.y - camera.cy) / camera.fy;

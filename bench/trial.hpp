@@ -21,10 +21,6 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // The LFTag paper's simulation camera: 640x480, fx = fy = 320, no distortion.
 lftag::Camera paper_camera();
 
-// A marker rotation as `lftag render` makes it: roll in the marker plane, then tilt
-// about the camera's x axis, then pan about its y axis (degrees).
-cv::Vec3d rotation(double roll_deg, double tilt_deg, double pan_deg = 0);
-
 // The pose with rotation `rvec` whose marker centre lies at depth `distance` on the
 // ray through image point `center`.
 Pose place(const lftag::Camera& camera, cv::Point2d center, double distance, const cv::Vec3d& rvec);
