@@ -2,17 +2,23 @@
 /* The lftag plugin: LFTag fiducial markers in GStreamer pipelines. */
 #include <gst/gst.h>
 
+#include "gstlftagdetect.h"
 #include "gstlftagtestsrc.h"
 #include "lftagmeta.h"
 
 static gboolean
 plugin_init (GstPlugin * plugin)
 {
+  gboolean ret = FALSE;
+
   lftag::gst::detection_meta_info ();
   lftag::gst::truth_meta_info ();
-  return GST_ELEMENT_REGISTER (lftagtestsrc, plugin);
+  ret |= GST_ELEMENT_REGISTER (lftagdetect, plugin);
+  ret |= GST_ELEMENT_REGISTER (lftagtestsrc, plugin);
+  return ret;
 }
 
 GST_PLUGIN_DEFINE (GST_VERSION_MAJOR, GST_VERSION_MINOR, lftag,
-    "LFTag fiducial markers: synthetic video with ground truth",
+    "LFTag fiducial markers: detection with metadata, messages and overlay; "
+    "synthetic video with ground truth",
     plugin_init, VERSION, "LGPL", PACKAGE, GST_PACKAGE_ORIGIN)

@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Reads LFTagTruthMeta from Python (PyGObject), as gst/lftag-meta.h says one can, after
-videoconvert and videoscale. Reports each case as TAP."""
+"""Reads LFTagTruthMeta and lftagdetect's LFTagMeta and region-of-interest metas from Python
+(PyGObject), as gst/lftag-meta.h and the README say one can, after videoconvert and videoscale.
+Reports each case as TAP."""
 import traceback
 
 import gi
 
 gi.require_version("Gst", "1.0")
-from gi.repository import Gst  # noqa: E402
+gi.require_version("GstVideo", "1.0")
+from gi.repository import GLib, Gst, GstVideo  # noqa: E402
 
 Gst.init(None)
 CASES = []
@@ -75,6 +77,37 @@ def ids_beyond_64_bits():
 def truth_is_not_detection():
     buffer = frames("lftagtestsrc num-buffers=1", 1)[0]
     assert buffer.get_custom_meta("LFTagMeta") is None
+
+
+@case
+def detections_and_regions():
+    buffer = frames("lftagtestsrc num-buffers=1 ids=6789,42 ! lftagdetect ! videoconvert ! "
+                    "video/x-raw,format=NV12", 1)[0]
+    meta = buffer.get_custom_meta("LFTagMeta")
+    assert meta is not None, "no LFTagMeta"
+    s = meta.get_structure()
+    assert (s.get_value("width"), s.get_value("height")) == (640, 480)
+    detections = list(s.get_value("detections"))
+    assert sorted(d.get_value("id") for d in detections) == [42, 6789]
+    for number, d in enumerate(detections):
+        assert d.get_name() == "lftag/detection" and d.get_value("family") == "3x3"
+        assert d.get_value("id-string") == str(d.get_value("id"))
+        corners = [list(p) for p in d.get_value("corners")]
+        assert len(corners) == 4 and len(list(d.get_value("keypoints"))) == 4
+        assert len(list(d.get_value("centroids"))) == 9 and len(list(d.get_value("rvec"))) == 3
+        assert list(d.get_value("tvec"))[2] > 0 and d.get_value("calibrated") is False
+        # Its region: videoconvert keeps the box.
+        roi = GstVideo.buffer_get_video_region_of_interest_meta_id(buffer, number)
+        assert roi is not None and GLib.quark_to_string(roi.roi_type) == "lftag"
+        assert all(roi.x - 1 <= x <= roi.x + roi.w and roi.y - 1 <= y <= roi.y + roi.h for x, y in corners)
+
+
+@case
+def region_params():
+    buffer = frames("lftagtestsrc num-buffers=1 ids=6789 ! lftagdetect", 1)[0]
+    roi = GstVideo.buffer_get_video_region_of_interest_meta_id(buffer, 0)
+    param = roi.get_param("lftag")
+    assert param is not None and param.get_value("id") == 6789 and param.get_value("id-string") == "6789"
 
 
 print(f"1..{len(CASES)}")

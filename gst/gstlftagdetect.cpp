@@ -1,0 +1,990 @@
+/* SPDX-License-Identifier: LGPL-2.1-or-later */
+/**
+ * SECTION:element-lftagdetect
+ * @title: lftagdetect
+ *
+ * Finds LFTag fiducial markers in video, decodes their ids exactly (up to 124
+ * bits for 8x8) and estimates their 6-DoF poses. It runs on the luma plane of
+ * GRAY8 and planar or semi-planar YUV frames without copying it, and on luma
+ * computed from RGB frames (BT.601 weights), at any size and stride.
+ *
+ * Unless #GstLFTagDetect:overlay is set the pixels are not touched and the frame
+ * is mapped read-only, so a frame shared with another branch of a tee is not
+ * copied: only the buffer's metadata changes. Every frame gets:
+ *
+ * - an LFTagMeta, the authoritative record: a GstCustomMeta (see lftag-meta.h)
+ *   whose structure holds the analysed frame's "width" and "height" and
+ *   "detections", an array of "lftag/detection" structures (empty when nothing
+ *   was found). It has no tags, so videoconvert, videoscale, queue, tee and
+ *   encoders keep it; its coordinates stay those of the analysed frame. It
+ *   replaces an LFTagMeta the buffer already carried.
+ * - one GstVideoRegionOfInterestMeta per detection: roi_type "lftag", ids
+ *   numbered on from the buffer's other regions, the bounding box of the outer
+ *   corners clipped to the frame, and a param structure "lftag" with the fields
+ *   of the detection. GStreamer 1.22's videoconvert and videoscale keep the
+ *   boxes (scaled) but drop the params.
+ *
+ * When #GstLFTagDetect:message is TRUE, a frame in which markers were found
+ * also posts an element message "lftag" (shown by gst-launch-1.0 -m) with:
+ *
+ * - "timestamp" (#GstClockTime): the buffer's presentation timestamp
+ * - "stream-time" (#GstClockTime): its stream time
+ * - "running-time" (#GstClockTime): its running time
+ * - "duration" (#GstClockTime): its duration
+ * - "width", "height" (#gint): the analysed frame
+ * - "detections" (#GstValueArray of #GstStructure): as in the LFTagMeta
+ *
+ * Each "lftag/detection" structure holds: "family" (string, "3x3"), "id"
+ * (guint64, only when the id fits), "id-string" (decimal, always, exact),
+ * "keypoints" (4 points: both baseline centres, then the bottom-left and
+ * bottom-right data cells), "centroids" (n^2 points, grid order), "corners"
+ * (4 points, the outer border clockwise from the marker's top-left), "center"
+ * (a point), "rvec" and "tvec" (3 doubles each: marker frame to camera frame,
+ * Rodrigues rotation and metres; the marker frame has its origin at the centre,
+ * x right, y down, z into the marker), "tag-size" (metres), "calibrated"
+ * (boolean), "decode-error", "edge-score" and "reprojection-error" (doubles).
+ * A point is an array of two doubles, in pixels with pixel centres at integers.
+ *
+ * Poses need the camera: #GstLFTagDetect:calibration-file (OpenCV YAML, XML or
+ * JSON, scaled to the frame when it records its own frame size) or
+ * #GstLFTagDetect:fx and friends. Without either, markers are still found and
+ * decoded, poses assume a default camera (fx = fy = frame width, centred) and
+ * are marked "calibrated" FALSE, and the element warns once per stream when a
+ * metric pose is wanted (axes drawn, or tag-size set).
+ *
+ * ## Example launch lines
+ * |[
+ * gst-launch-1.0 -m lftagtestsrc count=3 num-buffers=90 ! lftagdetect ! fakesink
+ * ]| Prints an "lftag" message for every frame of synthetic video.
+ * |[
+ * gst-launch-1.0 v4l2src ! videoconvert ! lftagdetect families=4x4 \
+ *     calibration-file=camera.yml tag-size=0.05 overlay=outline+id+axes ! \
+ *     videoconvert ! autovideosink
+ * ]| A calibrated webcam with outlines, ids and axes drawn.
+ * |[
+ * gst-launch-1.0 filesrc location=recording.mp4 ! decodebin ! videoconvert ! \
+ *     lftagdetect overlay=outline+id ! videoconvert ! vp8enc ! webmmux ! \
+ *     filesink location=annotated.webm
+ * ]| A recorded video annotated into a WebM file.
+ */
+#include "gstlftagdetect.h"
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include <gst/video/video.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <lftag/detector.hpp>
+#include <lftag/draw.hpp>
+
+#include "lftagmeta.h"
+
+GST_DEBUG_CATEGORY_STATIC (gst_lftag_detect_debug);
+#define GST_CAT_DEFAULT gst_lftag_detect_debug
+
+enum
+{
+  PROP_0,
+  PROP_FAMILIES,
+  PROP_TAG_SIZE,
+  PROP_CALIBRATION_FILE,
+  PROP_FX,
+  PROP_FY,
+  PROP_CX,
+  PROP_CY,
+  PROP_DISTORTION,
+  PROP_OVERLAY,
+  PROP_MESSAGE,
+  PROP_THRESHOLD_WINDOW,
+  PROP_THRESHOLD_OFFSET,
+  PROP_UPSAMPLE,
+  PROP_MAX_AREA_RATIO,
+  PROP_MIN_SPREAD_RATIO,
+  PROP_MAX_DECODE_ERROR,
+  PROP_MAX_CELL_RESIDUAL,
+};
+
+#define DEFAULT_PROP_FAMILIES "3x3,4x4"
+#define DEFAULT_PROP_TAG_SIZE 0.1
+#define DEFAULT_PROP_CALIBRATION_FILE nullptr
+#define DEFAULT_PROP_FOCAL 0.0
+#define DEFAULT_PROP_PRINCIPAL 0.0
+#define DEFAULT_PROP_DISTORTION nullptr
+#define DEFAULT_PROP_OVERLAY 0
+#define DEFAULT_PROP_MESSAGE TRUE
+/* The detector's own parameters default to the library's (DetectorParams). */
+
+#define DETECT_FORMATS "{ GRAY8, I420, YV12, NV12, NV21, Y42B, Y444, RGB, BGR, " \
+    "RGBx, BGRx, xRGB, xBGR, RGBA, BGRA, ARGB, ABGR }"
+
+static GstStaticPadTemplate sink_template = GST_STATIC_PAD_TEMPLATE ("sink",
+    GST_PAD_SINK,
+    GST_PAD_ALWAYS,
+    GST_STATIC_CAPS (GST_VIDEO_CAPS_MAKE (DETECT_FORMATS)));
+
+static GstStaticPadTemplate src_template = GST_STATIC_PAD_TEMPLATE ("src",
+    GST_PAD_SRC,
+    GST_PAD_ALWAYS,
+    GST_STATIC_CAPS (GST_VIDEO_CAPS_MAKE (DETECT_FORMATS)));
+
+#define GST_TYPE_LFTAG_DETECT_OVERLAY (gst_lftag_detect_overlay_get_type ())
+static GType
+gst_lftag_detect_overlay_get_type (void)
+{
+  static const GFlagsValue values[] = {
+    {GST_LFTAG_DETECT_OVERLAY_OUTLINE, "The outer border of each marker", "outline"},
+    {GST_LFTAG_DETECT_OVERLAY_ID, "Family and id at the marker's centre", "id"},
+    {GST_LFTAG_DETECT_OVERLAY_AXES,
+        "Axes: x red, y green, z blue, one tag size long", "axes"},
+    {0, nullptr, nullptr},
+  };
+  static const GType type = g_flags_register_static ("GstLFTagDetectOverlay", values);
+  return type;
+}
+
+/* The overlay layer is handed to GStreamer as its native ARGB, which is BGRA in
+ * memory (OpenCV's channel order) only on little-endian machines. */
+#if G_BYTE_ORDER != G_LITTLE_ENDIAN
+#error "lftagdetect's overlay assumes a little-endian machine"
+#endif
+
+namespace {
+
+using lftag::Camera;
+using lftag::Detection;
+using lftag::Family;
+
+/* Everything the detector is built from. */
+struct DetectorSettings {
+  std::vector<Family> families;
+  double tag_size = DEFAULT_PROP_TAG_SIZE;
+  double fx = DEFAULT_PROP_FOCAL, fy = DEFAULT_PROP_FOCAL;
+  double cx = DEFAULT_PROP_PRINCIPAL, cy = DEFAULT_PROP_PRINCIPAL;
+  std::vector<double> distortion;
+  int threshold_window = 0, threshold_offset = 0, upsample = 1;
+  double max_area_ratio = 0, min_spread_ratio = 0, max_decode_error = 0, max_cell_residual = 0;
+
+  auto tie () const {
+    return std::tie (families, tag_size, fx, fy, cx, cy, distortion, threshold_window,
+        threshold_offset, upsample, max_area_ratio, min_spread_ratio, max_decode_error,
+        max_cell_residual);
+  }
+  bool operator== (const DetectorSettings & o) const { return tie () == o.tie (); }
+  bool operator!= (const DetectorSettings & o) const { return !(*this == o); }
+};
+
+/* What the properties say; guarded by the object lock. */
+struct Settings {
+  DetectorSettings detector;
+  std::string families_text = DEFAULT_PROP_FAMILIES;
+  std::string distortion_text;
+  std::string calibration_file;
+  bool tag_size_set = false;    /* a metric pose was asked for */
+  guint overlay = DEFAULT_PROP_OVERLAY;
+  bool message = DEFAULT_PROP_MESSAGE;
+
+  Settings () {
+    const lftag::DetectorParams defaults;
+    detector.families = Family::parse_list (DEFAULT_PROP_FAMILIES);
+    detector.threshold_window = defaults.threshold_window;
+    detector.threshold_offset = defaults.threshold_offset;
+    detector.upsample = defaults.upsample;
+    detector.max_area_ratio = defaults.max_area_ratio;
+    detector.min_spread_ratio = defaults.min_spread_ratio;
+    detector.max_cell_residual = defaults.max_cell_residual;
+  }
+};
+
+/* Per-stream state, used by the streaming thread only (start, stop, caps and
+ * buffers are serialised). */
+struct State {
+  std::optional<Camera> calibration;    /* start() */
+  cv::Mat1f luma_weights;               /* set_info(): RGB formats, per byte of a pixel */
+  cv::Mat1b luma;                       /* RGB formats: reused */
+  cv::Mat4b layer;                      /* the overlay, transparent BGRA: reused */
+  cv::Mat1b alpha;                      /* the layer's alpha, where it is searched */
+  std::optional<lftag::Detector> detector;
+  DetectorSettings built, rejected;     /* the detector's settings; a set that failed */
+  bool warned_uncalibrated = false;
+};
+
+/* "k1,k2,p1,p2[,k3[,k4,k5,k6]]" as OpenCV orders them, with a decimal point
+ * whatever the locale. Throws std::invalid_argument. */
+std::vector<double>
+parse_distortion (const std::string & text)
+{
+  std::vector<double> values;
+  std::istringstream in (text);
+  std::string item;
+  while (std::getline (in, item, ',')) {
+    gchar *end = nullptr;
+    const double v = g_ascii_strtod (item.c_str (), &end);
+    if (end == item.c_str () || item.find_first_not_of (" \t", end - item.c_str ()) !=
+        std::string::npos || !std::isfinite (v))
+      throw std::invalid_argument ("'" + item + "' is not a number");
+    values.push_back (v);
+  }
+  if (values.size () != 4 && values.size () != 5 && values.size () != 8)
+    throw std::invalid_argument ("it needs 4, 5 or 8 comma-separated coefficients "
+        "(k1,k2,p1,p2[,k3[,k4,k5,k6]]), not " + std::to_string (values.size ()));
+  return values;
+}
+
+/* The camera for a frame: the calibration file, else fx..cy and the distortion,
+ * else the default (uncalibrated). Throws when the calibration cannot fit the frame. */
+Camera
+frame_camera (const DetectorSettings & s, const std::optional<Camera> & calibration,
+    int width, int height)
+{
+  if (calibration)
+    return calibration->for_frame (width, height);
+  if (s.fx > 0) {
+    Camera camera = Camera::pinhole (s.fx, s.fy > 0 ? s.fy : s.fx,
+        s.cx > 0 ? s.cx : (width - 1) / 2.0, s.cy > 0 ? s.cy : (height - 1) / 2.0,
+        width, height);
+    camera.distortion = s.distortion;
+    return camera;
+  }
+  return Camera::default_for (width, height);
+}
+
+lftag::DetectorParams
+detector_params (const DetectorSettings & s, const Camera & camera)
+{
+  lftag::DetectorParams p;
+  p.families = s.families;
+  p.tag_size = s.tag_size;
+  p.camera = camera;
+  p.threshold_window = s.threshold_window;
+  p.threshold_offset = s.threshold_offset;
+  p.upsample = s.upsample;
+  p.max_area_ratio = s.max_area_ratio;
+  p.min_spread_ratio = s.min_spread_ratio;
+  p.max_cell_residual = s.max_cell_residual;
+  if (s.max_decode_error > 0)
+    p.max_decode_error.fill (s.max_decode_error);
+  return p;
+}
+
+/* The BT.601 luma of packed RGB as one weight per byte of a pixel (0 for x and A). */
+cv::Mat1f
+luma_weights (const GstVideoFormatInfo * finfo)
+{
+  const float rgb[3] = {0.299f, 0.587f, 0.114f};
+  cv::Mat1f weights (1, GST_VIDEO_FORMAT_INFO_PSTRIDE (finfo, 0), 0.0f);
+  for (int c = 0; c < 3; ++c)
+    weights (0, GST_VIDEO_FORMAT_INFO_POFFSET (finfo, c)) = rgb[c];
+  return weights;
+}
+
+/* The pixels of a detection: its outer corners' bounding box, clipped to the frame. */
+cv::Rect
+bounding_box (const Detection & d, int width, int height)
+{
+  double x0 = G_MAXDOUBLE, y0 = G_MAXDOUBLE, x1 = -G_MAXDOUBLE, y1 = -G_MAXDOUBLE;
+  for (const cv::Point2d & p : d.corners) {
+    x0 = std::min (x0, p.x), x1 = std::max (x1, p.x);
+    y0 = std::min (y0, p.y), y1 = std::max (y1, p.y);
+  }
+  /* Pixel i spans [i - 0.5, i + 0.5). */
+  const int left = std::max (0, int (std::floor (x0 + 0.5)));
+  const int top = std::max (0, int (std::floor (y0 + 0.5)));
+  const int right = std::min (width - 1, int (std::floor (x1 + 0.5)));
+  const int bottom = std::min (height - 1, int (std::floor (y1 + 0.5)));
+  return cv::Rect (left, top, std::max (0, right - left + 1), std::max (0, bottom - top + 1));
+}
+
+}  // namespace
+
+struct _GstLFTagDetect
+{
+  GstVideoFilter parent;
+
+  Settings *settings;
+  State *state;
+};
+
+static void gst_lftag_detect_set_property (GObject * object, guint prop_id,
+    const GValue * value, GParamSpec * pspec);
+static void gst_lftag_detect_get_property (GObject * object, guint prop_id,
+    GValue * value, GParamSpec * pspec);
+static void gst_lftag_detect_finalize (GObject * object);
+
+static gboolean gst_lftag_detect_start (GstBaseTransform * trans);
+static gboolean gst_lftag_detect_stop (GstBaseTransform * trans);
+static GstFlowReturn gst_lftag_detect_transform_ip (GstBaseTransform * trans,
+    GstBuffer * buffer);
+static gboolean gst_lftag_detect_set_info (GstVideoFilter * filter, GstCaps * incaps,
+    GstVideoInfo * in_info, GstCaps * outcaps, GstVideoInfo * out_info);
+
+#define gst_lftag_detect_parent_class parent_class
+G_DEFINE_TYPE (GstLFTagDetect, gst_lftag_detect, GST_TYPE_VIDEO_FILTER);
+GST_ELEMENT_REGISTER_DEFINE (lftagdetect, "lftagdetect", GST_RANK_NONE,
+    GST_TYPE_LFTAG_DETECT);
+
+static void
+gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
+{
+  GObjectClass *gobject_class = G_OBJECT_CLASS (klass);
+  GstElementClass *element_class = GST_ELEMENT_CLASS (klass);
+  GstBaseTransformClass *trans_class = GST_BASE_TRANSFORM_CLASS (klass);
+  GstVideoFilterClass *filter_class = GST_VIDEO_FILTER_CLASS (klass);
+  const auto playing = GParamFlags (G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS |
+      GST_PARAM_MUTABLE_PLAYING);
+  const auto ready = GParamFlags (G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS |
+      GST_PARAM_MUTABLE_READY);
+  const lftag::DetectorParams defaults;
+
+  GST_DEBUG_CATEGORY_INIT (gst_lftag_detect_debug, "lftagdetect", 0,
+      "LFTag marker detector");
+
+  gobject_class->set_property = gst_lftag_detect_set_property;
+  gobject_class->get_property = gst_lftag_detect_get_property;
+  gobject_class->finalize = gst_lftag_detect_finalize;
+
+  g_object_class_install_property (gobject_class, PROP_FAMILIES,
+      g_param_spec_string ("families", "Families",
+          "Marker families to detect, comma-separated, from 2x2 to 8x8 (for "
+          "example 3x3,4x4,6x6); every family costs a little time. Unset: the default",
+          DEFAULT_PROP_FAMILIES, playing));
+  g_object_class_install_property (gobject_class, PROP_TAG_SIZE,
+      g_param_spec_double ("tag-size", "Tag size",
+          "Outer edge of the markers' black border in metres: the scale of the "
+          "poses (tvec) and of the drawn axes. Metric only with a calibrated camera",
+          0.001, 100.0, DEFAULT_PROP_TAG_SIZE, playing));
+  g_object_class_install_property (gobject_class, PROP_CALIBRATION_FILE,
+      g_param_spec_string ("calibration-file", "Calibration file",
+          "OpenCV camera calibration (YAML, XML or JSON with camera_matrix and "
+          "distortion_coefficients, as OpenCV's calibration samples write, or "
+          "cameraMatrix and distCoeffs, as cameracalibrate writes). Used instead of "
+          "fx, fy, cx, cy and distortion; scaled to the frame when it records "
+          "image_width and image_height, which must then have the frame's shape",
+          DEFAULT_PROP_CALIBRATION_FILE, ready));
+  g_object_class_install_property (gobject_class, PROP_FX,
+      g_param_spec_double ("fx", "Focal length x",
+          "Horizontal focal length in pixels, for poses. 0: no camera given; poses "
+          "then assume fx = fy = frame width, centred, and are marked uncalibrated",
+          0.0, 1e6, DEFAULT_PROP_FOCAL, playing));
+  g_object_class_install_property (gobject_class, PROP_FY,
+      g_param_spec_double ("fy", "Focal length y",
+          "Vertical focal length in pixels (0: equal to fx)",
+          0.0, 1e6, DEFAULT_PROP_FOCAL, playing));
+  g_object_class_install_property (gobject_class, PROP_CX,
+      g_param_spec_double ("cx", "Principal point x",
+          "Principal point x in pixels, pixel centres at integers (0: the frame centre)",
+          0.0, 1e6, DEFAULT_PROP_PRINCIPAL, playing));
+  g_object_class_install_property (gobject_class, PROP_CY,
+      g_param_spec_double ("cy", "Principal point y",
+          "Principal point y in pixels, pixel centres at integers (0: the frame centre)",
+          0.0, 1e6, DEFAULT_PROP_PRINCIPAL, playing));
+  g_object_class_install_property (gobject_class, PROP_DISTORTION,
+      g_param_spec_string ("distortion", "Distortion",
+          "Lens distortion with fx: k1,k2,p1,p2[,k3[,k4,k5,k6]] as OpenCV orders "
+          "them, comma-separated (unset: none)",
+          DEFAULT_PROP_DISTORTION, playing));
+  g_object_class_install_property (gobject_class, PROP_OVERLAY,
+      g_param_spec_flags ("overlay", "Overlay",
+          "What to draw onto the frames, anti-aliased, scaled to the frame size "
+          "(for example outline+id+axes). Drawing writes to the frame (a copy when "
+          "it is shared); with nothing to draw the pixels are left untouched",
+          GST_TYPE_LFTAG_DETECT_OVERLAY, DEFAULT_PROP_OVERLAY, playing));
+  g_object_class_install_property (gobject_class, PROP_MESSAGE,
+      g_param_spec_boolean ("message", "Message",
+          "Post an element message \"lftag\" for every frame with detections",
+          DEFAULT_PROP_MESSAGE, playing));
+  g_object_class_install_property (gobject_class, PROP_THRESHOLD_WINDOW,
+      g_param_spec_int ("threshold-window", "Threshold window",
+          "Side in pixels of the window whose mean grey level a pixel must be below "
+          "to count as black (the paper's M). Larger suits large markers",
+          2, 1024, defaults.threshold_window, playing));
+  g_object_class_install_property (gobject_class, PROP_THRESHOLD_OFFSET,
+      g_param_spec_int ("threshold-offset", "Threshold offset",
+          "Grey levels below the window's mean for a pixel to count as black; "
+          "raising it ignores faint texture and noise",
+          0, 255, defaults.threshold_offset, playing));
+  g_object_class_install_property (gobject_class, PROP_UPSAMPLE,
+      g_param_spec_int ("upsample", "Upsample",
+          "1, or 2 to detect on the frame enlarged twice: far and steeply tilted "
+          "markers are found further away, at about four times the cost",
+          1, 2, defaults.upsample, playing));
+  g_object_class_install_property (gobject_class, PROP_MAX_AREA_RATIO,
+      g_param_spec_double ("max-area-ratio", "Maximum area ratio",
+          "tau1: a candidate is rejected when its largest black square is larger "
+          "than this many times its smallest (the design ratio is 1.78)",
+          1.0, 100.0, defaults.max_area_ratio, playing));
+  g_object_class_install_property (gobject_class, PROP_MIN_SPREAD_RATIO,
+      g_param_spec_double ("min-spread-ratio", "Minimum spread ratio",
+          "tau2: a candidate is rejected when its squares' centres are this close to "
+          "collinear (minor to major axis of their scatter)",
+          0.0, 1.0, defaults.min_spread_ratio, playing));
+  g_object_class_install_property (gobject_class, PROP_MAX_DECODE_ERROR,
+      g_param_spec_double ("max-decode-error", "Maximum decoding error",
+          "tau3: a reading is rejected when its decoding error exceeds this, for "
+          "every family (0: each family's calibrated default; the paper's 5e-4 for "
+          "3x3 and 1e-3 for 4x4)",
+          0.0, 1.0, 0.0, playing));
+  g_object_class_install_property (gobject_class, PROP_MAX_CELL_RESIDUAL,
+      g_param_spec_double ("max-cell-residual", "Maximum cell residual",
+          "A reading is rejected when a square lies further than this from its "
+          "decoded position, in marker units (positions are 1 unit apart)",
+          0.01, 1.0, defaults.max_cell_residual, playing));
+
+  gst_element_class_set_static_metadata (element_class,
+      "LFTag detector", "Filter/Analyzer/Video",
+      "Finds LFTag fiducial markers, decodes their ids and estimates their poses: "
+      "an LFTagMeta and region-of-interest metas on every frame, lftag element "
+      "messages, and an optional overlay",
+      "The LFTag developers");
+  gst_element_class_add_static_pad_template (element_class, &sink_template);
+  gst_element_class_add_static_pad_template (element_class, &src_template);
+
+  trans_class->start = GST_DEBUG_FUNCPTR (gst_lftag_detect_start);
+  trans_class->stop = GST_DEBUG_FUNCPTR (gst_lftag_detect_stop);
+  /* Our own in-place transform: GstVideoFilter's maps every frame writable. */
+  trans_class->transform_ip = GST_DEBUG_FUNCPTR (gst_lftag_detect_transform_ip);
+  filter_class->set_info = GST_DEBUG_FUNCPTR (gst_lftag_detect_set_info);
+
+  gst_type_mark_as_plugin_api (GST_TYPE_LFTAG_DETECT_OVERLAY, GstPluginAPIFlags (0));
+
+  /* So that applications find the meta by name as soon as the element exists. */
+  lftag::gst::detection_meta_info ();
+}
+
+static void
+gst_lftag_detect_init (GstLFTagDetect * self)
+{
+  self->settings = new Settings ();
+  self->state = new State ();
+  /* Never passthrough (metadata is added to every buffer), always in place. */
+  gst_base_transform_set_passthrough (GST_BASE_TRANSFORM (self), FALSE);
+  gst_base_transform_set_in_place (GST_BASE_TRANSFORM (self), TRUE);
+}
+
+static void
+gst_lftag_detect_finalize (GObject * object)
+{
+  GstLFTagDetect *self = GST_LFTAG_DETECT (object);
+
+  delete self->settings;
+  delete self->state;
+
+  G_OBJECT_CLASS (parent_class)->finalize (object);
+}
+
+static void
+gst_lftag_detect_set_property (GObject * object, guint prop_id,
+    const GValue * value, GParamSpec * pspec)
+{
+  GstLFTagDetect *self = GST_LFTAG_DETECT (object);
+  std::vector<Family> families;
+  std::vector<double> distortion;
+  const gchar *text = nullptr;
+
+  /* Text is parsed outside the lock; bad text is refused and changes nothing. */
+  switch (prop_id) {
+    case PROP_FAMILIES:
+      text = g_value_get_string (value);
+      try {
+        families = Family::parse_list (text ? text : DEFAULT_PROP_FAMILIES);
+        if (families.empty ())
+          throw std::invalid_argument ("no family given");
+      } catch (const std::exception & e) {
+        g_warning ("%s: ignoring families \"%s\": %s", GST_OBJECT_NAME (self), text,
+            e.what ());
+        return;
+      }
+      break;
+    case PROP_DISTORTION:
+      text = g_value_get_string (value);
+      try {
+        if (text && *text)
+          distortion = parse_distortion (text);
+      } catch (const std::exception & e) {
+        g_warning ("%s: ignoring distortion \"%s\": %s", GST_OBJECT_NAME (self), text,
+            e.what ());
+        return;
+      }
+      break;
+    default:
+      break;
+  }
+
+  GST_OBJECT_LOCK (self);
+  Settings & s = *self->settings;
+  switch (prop_id) {
+    case PROP_FAMILIES:
+      s.families_text = text ? text : DEFAULT_PROP_FAMILIES;
+      s.detector.families = std::move (families);
+      break;
+    case PROP_TAG_SIZE:
+      s.detector.tag_size = g_value_get_double (value);
+      s.tag_size_set = true;
+      break;
+    case PROP_CALIBRATION_FILE:
+      s.calibration_file = g_value_get_string (value) ? g_value_get_string (value) : "";
+      break;
+    case PROP_FX:
+      s.detector.fx = g_value_get_double (value);
+      break;
+    case PROP_FY:
+      s.detector.fy = g_value_get_double (value);
+      break;
+    case PROP_CX:
+      s.detector.cx = g_value_get_double (value);
+      break;
+    case PROP_CY:
+      s.detector.cy = g_value_get_double (value);
+      break;
+    case PROP_DISTORTION:
+      s.distortion_text = distortion.empty () ? "" : text;
+      s.detector.distortion = std::move (distortion);
+      break;
+    case PROP_OVERLAY:
+      s.overlay = g_value_get_flags (value);
+      break;
+    case PROP_MESSAGE:
+      s.message = g_value_get_boolean (value);
+      break;
+    case PROP_THRESHOLD_WINDOW:
+      s.detector.threshold_window = g_value_get_int (value);
+      break;
+    case PROP_THRESHOLD_OFFSET:
+      s.detector.threshold_offset = g_value_get_int (value);
+      break;
+    case PROP_UPSAMPLE:
+      s.detector.upsample = g_value_get_int (value);
+      break;
+    case PROP_MAX_AREA_RATIO:
+      s.detector.max_area_ratio = g_value_get_double (value);
+      break;
+    case PROP_MIN_SPREAD_RATIO:
+      s.detector.min_spread_ratio = g_value_get_double (value);
+      break;
+    case PROP_MAX_DECODE_ERROR:
+      s.detector.max_decode_error = g_value_get_double (value);
+      break;
+    case PROP_MAX_CELL_RESIDUAL:
+      s.detector.max_cell_residual = g_value_get_double (value);
+      break;
+    default:
+      G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
+      break;
+  }
+  GST_OBJECT_UNLOCK (self);
+}
+
+static void
+gst_lftag_detect_get_property (GObject * object, guint prop_id, GValue * value,
+    GParamSpec * pspec)
+{
+  GstLFTagDetect *self = GST_LFTAG_DETECT (object);
+  auto optional_string = [](const std::string & text) {
+    return text.empty ()? nullptr : text.c_str ();
+  };
+
+  GST_OBJECT_LOCK (self);
+  const Settings & s = *self->settings;
+  switch (prop_id) {
+    case PROP_FAMILIES:
+      g_value_set_string (value, s.families_text.c_str ());
+      break;
+    case PROP_TAG_SIZE:
+      g_value_set_double (value, s.detector.tag_size);
+      break;
+    case PROP_CALIBRATION_FILE:
+      g_value_set_string (value, optional_string (s.calibration_file));
+      break;
+    case PROP_FX:
+      g_value_set_double (value, s.detector.fx);
+      break;
+    case PROP_FY:
+      g_value_set_double (value, s.detector.fy);
+      break;
+    case PROP_CX:
+      g_value_set_double (value, s.detector.cx);
+      break;
+    case PROP_CY:
+      g_value_set_double (value, s.detector.cy);
+      break;
+    case PROP_DISTORTION:
+      g_value_set_string (value, optional_string (s.distortion_text));
+      break;
+    case PROP_OVERLAY:
+      g_value_set_flags (value, s.overlay);
+      break;
+    case PROP_MESSAGE:
+      g_value_set_boolean (value, s.message);
+      break;
+    case PROP_THRESHOLD_WINDOW:
+      g_value_set_int (value, s.detector.threshold_window);
+      break;
+    case PROP_THRESHOLD_OFFSET:
+      g_value_set_int (value, s.detector.threshold_offset);
+      break;
+    case PROP_UPSAMPLE:
+      g_value_set_int (value, s.detector.upsample);
+      break;
+    case PROP_MAX_AREA_RATIO:
+      g_value_set_double (value, s.detector.max_area_ratio);
+      break;
+    case PROP_MIN_SPREAD_RATIO:
+      g_value_set_double (value, s.detector.min_spread_ratio);
+      break;
+    case PROP_MAX_DECODE_ERROR:
+      g_value_set_double (value, s.detector.max_decode_error);
+      break;
+    case PROP_MAX_CELL_RESIDUAL:
+      g_value_set_double (value, s.detector.max_cell_residual);
+      break;
+    default:
+      G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
+      break;
+  }
+  GST_OBJECT_UNLOCK (self);
+}
+
+static Settings
+gst_lftag_detect_settings (GstLFTagDetect * self)
+{
+  GST_OBJECT_LOCK (self);
+  Settings s = *self->settings;
+  GST_OBJECT_UNLOCK (self);
+  return s;
+}
+
+/* Loads the calibration, so that a bad file fails the state change. */
+static gboolean
+gst_lftag_detect_start (GstBaseTransform * trans)
+{
+  GstLFTagDetect *self = GST_LFTAG_DETECT (trans);
+  const Settings s = gst_lftag_detect_settings (self);
+  State & st = *self->state;
+
+  st.calibration.reset ();
+  st.detector.reset ();
+  st.warned_uncalibrated = false;
+  if (s.calibration_file.empty ())
+    return TRUE;
+
+  const gchar *path = s.calibration_file.c_str ();
+  if (!g_file_test (path, G_FILE_TEST_IS_REGULAR)) {
+    GST_ELEMENT_ERROR (self, RESOURCE, NOT_FOUND,
+        ("Calibration file \"%s\" does not exist.", path), (nullptr));
+    return FALSE;
+  }
+  try {
+    st.calibration = Camera::load (s.calibration_file);
+  } catch (const std::exception & e) {
+    GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS, ("Invalid %s.", e.what ()), (nullptr));
+    return FALSE;
+  }
+  GST_INFO_OBJECT (self, "calibration from %s: fx %g fy %g cx %g cy %g, %dx%d", path,
+      st.calibration->fx, st.calibration->fy, st.calibration->cx, st.calibration->cy,
+      st.calibration->width, st.calibration->height);
+  return TRUE;
+}
+
+static gboolean
+gst_lftag_detect_stop (GstBaseTransform * trans)
+{
+  State & st = *GST_LFTAG_DETECT (trans)->state;
+
+  st.calibration.reset ();
+  st.detector.reset ();
+  st.luma.release ();
+  st.layer.release ();
+  return TRUE;
+}
+
+static gboolean
+gst_lftag_detect_set_info (GstVideoFilter * filter, GstCaps *, GstVideoInfo * in_info,
+    GstCaps *, GstVideoInfo *)
+{
+  GstLFTagDetect *self = GST_LFTAG_DETECT (filter);
+  const Settings s = gst_lftag_detect_settings (self);
+  State & st = *self->state;
+  const int width = GST_VIDEO_INFO_WIDTH (in_info), height = GST_VIDEO_INFO_HEIGHT (in_info);
+
+  /* A calibration for another shape of frame fails here, not frame after frame. */
+  try {
+    frame_camera (s.detector, st.calibration, width, height);
+  } catch (const std::exception & e) {
+    GST_ELEMENT_ERROR (self, CORE, NEGOTIATION,
+        ("Calibration file \"%s\" does not fit %dx%d video: %s.",
+            s.calibration_file.c_str (), width, height, e.what ()), (nullptr));
+    return FALSE;
+  }
+
+  st.detector.reset ();         /* its camera is the frame's */
+  st.luma_weights.release ();
+  if (GST_VIDEO_INFO_IS_RGB (in_info))
+    st.luma_weights = luma_weights (in_info->finfo);
+  st.luma.release ();
+  st.layer.release ();
+  return TRUE;
+}
+
+/* (Re)builds the detector when its settings changed. A change that cannot be
+ * honoured is reported once and the detector stays as it was. */
+static gboolean
+gst_lftag_detect_update_detector (GstLFTagDetect * self, const Settings & s,
+    const GstVideoInfo * info)
+{
+  State & st = *self->state;
+
+  if (st.detector && (st.built == s.detector || st.rejected == s.detector))
+    return TRUE;
+  try {
+    const Camera camera = frame_camera (s.detector, st.calibration,
+        GST_VIDEO_INFO_WIDTH (info), GST_VIDEO_INFO_HEIGHT (info));
+    st.detector.emplace (detector_params (s.detector, camera));
+    st.built = s.detector;
+    st.rejected = DetectorSettings ();
+    GST_DEBUG_OBJECT (self, "detector for %s, camera fx %g fy %g cx %g cy %g%s",
+        s.families_text.c_str (), camera.fx, camera.fy, camera.cx, camera.cy,
+        camera.calibrated ? "" : " (default)");
+  } catch (const std::exception & e) {
+    if (!st.detector) {
+      GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS, ("Invalid settings: %s.", e.what ()),
+          (nullptr));
+      return FALSE;
+    }
+    GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
+        ("Invalid settings: %s; the detector keeps the previous ones.", e.what ()),
+        (nullptr));
+    st.rejected = s.detector;
+  }
+  return TRUE;
+}
+
+/* The frame's luma as 8-bit grey: plane 0 itself, or computed from RGB. */
+static lftag::ImageView
+gst_lftag_detect_luma (State & st, GstVideoFrame * frame)
+{
+  const int width = GST_VIDEO_FRAME_WIDTH (frame), height = GST_VIDEO_FRAME_HEIGHT (frame);
+  auto *data = static_cast < std::uint8_t * >(GST_VIDEO_FRAME_PLANE_DATA (frame, 0));
+  const int stride = GST_VIDEO_FRAME_PLANE_STRIDE (frame, 0);
+
+  if (st.luma_weights.empty ())
+    return lftag::ImageView (data, width, height, stride);
+  const cv::Mat packed (height, width, CV_8UC (st.luma_weights.cols), data,
+      std::size_t (stride));
+  cv::transform (packed, st.luma, st.luma_weights);
+  return lftag::ImageView (st.luma);
+}
+
+/* Removes what an earlier analysis of this buffer attached (a second LFTagMeta
+ * would hide behind the first); returns the next free region-of-interest id. */
+static gint
+gst_lftag_detect_clear_metas (GstBuffer * buffer)
+{
+  struct Scan {
+    GQuark lftag = g_quark_from_static_string ("lftag");
+    gint next_id = 0;
+  } scan;
+
+  gst_buffer_foreach_meta (buffer,[](GstBuffer *, GstMeta ** meta, gpointer data) -> gboolean {
+    Scan & scan = *static_cast < Scan * >(data);
+    if ((*meta)->info == lftag::gst::detection_meta_info ()) {
+      *meta = nullptr;
+    } else if ((*meta)->info->api == GST_VIDEO_REGION_OF_INTEREST_META_API_TYPE) {
+      auto *roi = reinterpret_cast < GstVideoRegionOfInterestMeta * >(*meta);
+      if (roi->roi_type == scan.lftag)
+        *meta = nullptr;
+      else
+        scan.next_id = std::max (scan.next_id, roi->id + 1);
+    }
+    return TRUE;
+  }, &scan);
+  return scan.next_id;
+}
+
+static void
+gst_lftag_detect_add_metas (GstBuffer * buffer, const GstVideoInfo * info,
+    const std::vector<Detection> & detections)
+{
+  const int width = GST_VIDEO_INFO_WIDTH (info), height = GST_VIDEO_INFO_HEIGHT (info);
+  const gint first_id = gst_lftag_detect_clear_metas (buffer);
+
+  lftag::gst::add_detection_meta (buffer, width, height, detections);
+  for (std::size_t i = 0; i < detections.size (); ++i) {
+    const cv::Rect box = bounding_box (detections[i], width, height);
+    GstVideoRegionOfInterestMeta *roi =
+        gst_buffer_add_video_region_of_interest_meta (buffer, "lftag", box.x, box.y,
+        box.width, box.height);
+    roi->id = first_id + gint (i);
+    roi->parent_id = -1;
+    GstStructure *param = lftag::gst::detection_structure (detections[i]);
+    gst_structure_set_name (param, "lftag");
+    gst_video_region_of_interest_meta_add_param (roi, param);
+  }
+}
+
+static void
+gst_lftag_detect_post_message (GstLFTagDetect * self, GstBuffer * buffer,
+    const GstVideoInfo * info, const std::vector<Detection> & detections)
+{
+  const GstSegment *segment = &GST_BASE_TRANSFORM (self)->segment;
+  const GstClockTime pts = GST_BUFFER_PTS (buffer);
+
+  GstStructure *s = gst_structure_new ("lftag",
+      "timestamp", G_TYPE_UINT64, pts,
+      "stream-time", G_TYPE_UINT64,
+      gst_segment_to_stream_time (segment, GST_FORMAT_TIME, pts),
+      "running-time", G_TYPE_UINT64,
+      gst_segment_to_running_time (segment, GST_FORMAT_TIME, pts),
+      "duration", G_TYPE_UINT64, GST_BUFFER_DURATION (buffer),
+      "width", G_TYPE_INT, GST_VIDEO_INFO_WIDTH (info),
+      "height", G_TYPE_INT, GST_VIDEO_INFO_HEIGHT (info), nullptr);
+  lftag::gst::set_detections (s, LFTAG_META_FIELD_DETECTIONS, detections);
+  gst_element_post_message (GST_ELEMENT (self),
+      gst_message_new_element (GST_OBJECT (self), s));
+}
+
+/* Where the layer was drawn on: near the marker (`near`) if the drawing stays
+ * inside it, else anywhere (a long label, long axes). */
+static cv::Rect
+drawn_extent (const cv::Mat4b & layer, cv::Mat1b & alpha, const cv::Rect & near)
+{
+  const cv::Rect all (0, 0, layer.cols, layer.rows);
+  const cv::Rect window = near & all;
+  cv::extractChannel (layer (window), alpha, 3);
+  const cv::Rect box = cv::boundingRect (alpha) + window.tl ();
+  const bool inside = !box.empty ()
+      && (box.x > window.x || window.x == 0) && (box.y > window.y || window.y == 0)
+      && (box.br ().x < window.br ().x || window.br ().x == all.br ().x)
+      && (box.br ().y < window.br ().y || window.br ().y == all.br ().y);
+  if (inside || window == all)
+    return box;
+  cv::extractChannel (layer, alpha, 3);
+  return cv::boundingRect (alpha);
+}
+
+/* A copy of part of the layer as an overlay rectangle at its place in the frame. */
+static GstVideoOverlayRectangle *
+overlay_rectangle (const cv::Mat4b & layer, const cv::Rect & box)
+{
+  GstBuffer *pixels = gst_buffer_new_allocate (nullptr, gsize (box.area ()) * 4, nullptr);
+  gst_buffer_add_video_meta (pixels, GST_VIDEO_FRAME_FLAG_NONE,
+      GST_VIDEO_OVERLAY_COMPOSITION_FORMAT_RGB, box.width, box.height);
+  GstMapInfo map;
+  gst_buffer_map (pixels, &map, GST_MAP_WRITE);
+  layer (box).copyTo (cv::Mat4b (box.height, box.width, reinterpret_cast < cv::Vec4b * >(map.data)));
+  gst_buffer_unmap (pixels, &map);
+  /* Anti-aliased strokes on a transparent layer come out with premultiplied alpha. */
+  GstVideoOverlayRectangle *rectangle = gst_video_overlay_rectangle_new_raw (pixels,
+      box.x, box.y, box.width, box.height,
+      GST_VIDEO_OVERLAY_FORMAT_FLAG_PREMULTIPLIED_ALPHA);
+  gst_buffer_unref (pixels);
+  return rectangle;
+}
+
+/* Draws each marker onto a transparent layer, takes what was drawn as an overlay
+ * rectangle of its own (so that only the markers' surroundings are blended, not
+ * the span between them) and blends them all into the frame. */
+static void
+gst_lftag_detect_draw (State & st, GstVideoFrame * frame, const Settings & s,
+    const Camera & camera, const std::vector<Detection> & detections)
+{
+  const int width = GST_VIDEO_FRAME_WIDTH (frame), height = GST_VIDEO_FRAME_HEIGHT (frame);
+  if (st.layer.empty ())
+    st.layer = cv::Mat4b::zeros (height, width);
+
+  lftag::DrawOptions options;
+  options.outline = s.overlay & GST_LFTAG_DETECT_OVERLAY_OUTLINE;
+  options.id = s.overlay & GST_LFTAG_DETECT_OVERLAY_ID;
+  options.axes = s.overlay & GST_LFTAG_DETECT_OVERLAY_AXES;
+
+  GstVideoOverlayComposition *composition = gst_video_overlay_composition_new (nullptr);
+  for (const Detection & d : detections) {
+    cv::Mat layer = st.layer;
+    lftag::draw_detections (layer, {d}, camera, options);
+    const cv::Rect corners = bounding_box (d, width, height);
+    const int margin = std::max ({corners.width, corners.height, std::min (width, height) / 8});
+    const cv::Rect near (corners.x - margin, corners.y - margin,
+        corners.width + 2 * margin, corners.height + 2 * margin);
+    const cv::Rect box = drawn_extent (st.layer, st.alpha, near);
+    if (box.empty ())
+      continue;
+    GstVideoOverlayRectangle *rectangle = overlay_rectangle (st.layer, box);
+    gst_video_overlay_composition_add_rectangle (composition, rectangle);
+    gst_video_overlay_rectangle_unref (rectangle);
+    st.layer (box).setTo (cv::Scalar::all (0));
+  }
+  gst_video_overlay_composition_blend (composition, frame);
+  gst_video_overlay_composition_unref (composition);
+}
+
+static GstFlowReturn
+gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
+{
+  GstLFTagDetect *self = GST_LFTAG_DETECT (trans);
+  GstVideoInfo *info = &GST_VIDEO_FILTER (self)->in_info;
+  State & st = *self->state;
+  const Settings s = gst_lftag_detect_settings (self);
+
+  if (GST_VIDEO_INFO_FORMAT (info) == GST_VIDEO_FORMAT_UNKNOWN) {
+    GST_ELEMENT_ERROR (self, CORE, NEGOTIATION, (nullptr),
+        ("format wasn't negotiated before the first frame"));
+    return GST_FLOW_NOT_NEGOTIATED;
+  }
+  if (!gst_lftag_detect_update_detector (self, s, info))
+    return GST_FLOW_ERROR;
+
+  const Camera & camera = st.detector->params ().camera;
+  const bool metric = (s.overlay & GST_LFTAG_DETECT_OVERLAY_AXES) || s.tag_size_set;
+  if (metric && !camera.calibrated && !st.warned_uncalibrated) {
+    GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
+        ("No camera calibration: poses assume the default camera (fx = fy = frame "
+            "width, centred) and are marked uncalibrated, so distances and axes are "
+            "not metric. Set calibration-file, or fx, fy, cx and cy."), (nullptr));
+    st.warned_uncalibrated = true;
+  }
+
+  /* Detection reads the frame only: a shared frame is not copied. */
+  GstVideoFrame frame;
+  if (!gst_video_frame_map (&frame, info, buffer, GST_MAP_READ)) {
+    GST_WARNING_OBJECT (self, "cannot map %" GST_PTR_FORMAT ", passed on unanalysed",
+        buffer);
+    return GST_FLOW_OK;
+  }
+  std::vector<Detection> detections;
+  try {
+    detections = st.detector->detect (gst_lftag_detect_luma (st, &frame));
+  } catch (const std::exception & e) {
+    gst_video_frame_unmap (&frame);
+    GST_WARNING_OBJECT (self, "detection failed on %" GST_PTR_FORMAT
+        ", passed on unanalysed: %s", buffer, e.what ());
+    return GST_FLOW_OK;
+  }
+  gst_video_frame_unmap (&frame);
+  GST_LOG_OBJECT (self, "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT,
+      detections.size (), GST_TIME_ARGS (GST_BUFFER_PTS (buffer)));
+
+  gst_lftag_detect_add_metas (buffer, info, detections);
+
+  if (s.overlay && !detections.empty ()) {
+    if (gst_video_frame_map (&frame, info, buffer, GST_MAP_READWRITE)) {
+      try {
+        gst_lftag_detect_draw (st, &frame, s, camera, detections);
+      } catch (const std::exception & e) {
+        GST_WARNING_OBJECT (self, "overlay failed: %s", e.what ());
+        st.layer.release ();    /* it may hold a half-drawn frame */
+      }
+      gst_video_frame_unmap (&frame);
+    } else {
+      GST_WARNING_OBJECT (self, "cannot map %" GST_PTR_FORMAT " to draw on it", buffer);
+    }
+  }
+
+  if (s.message && !detections.empty ())
+    gst_lftag_detect_post_message (self, buffer, info, detections);
+  return GST_FLOW_OK;
+}
