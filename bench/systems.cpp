@@ -8,6 +8,7 @@
 
 #include "apriltag_system.hpp"
 #include "aruco_system.hpp"
+#include "lftag_system.hpp"
 
 namespace bench {
 namespace {
@@ -18,6 +19,11 @@ using Factory = std::function<std::unique_ptr<FiducialSystem>()>;
 const std::vector<std::pair<std::string, Factory>>& registry() {
   static const std::vector<std::pair<std::string, Factory>> all = [] {
     std::vector<std::pair<std::string, Factory>> r;
+    for (int n = lftag::Family::kMinN; n <= lftag::Family::kMaxN; ++n) {
+      r.emplace_back("lftag-" + lftag::Family(n).name(), [=] { return std::make_unique<LftagSystem>(n); });
+      if (n == 3 || n == 4)
+        r.emplace_back("lftag-" + lftag::Family(n).name() + "-up2", [=] { return std::make_unique<LftagSystem>(n, 2); });
+    }
     for (const std::string family : {"16h5", "25h9", "36h11", "41h12"})
       for (int decimate : {1, 2})
         r.emplace_back("apriltag-" + family + "-d" + std::to_string(decimate),

@@ -47,9 +47,19 @@ Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, co
   for (int y = cy0; y <= cy1; ++y)
     for (int x = cx0; x <= cx1; ++x)
       if (binary.black(x, y)) cls[std::size_t(y - cy0) * w + (x - cx0)] = kOther;
-  tree.for_each_run(region, [&](int y, int rx0, int rx1) {
-    std::fill_n(cls.begin() + std::size_t(y - cy0) * w + (rx0 - cx0), rx1 - rx0, kOwn);
-  });
+  // The blob with everything it encloses: a marker's square has no holes, but one wider
+  // than the threshold window binarises as a ring around a white hole, whose dark pixels
+  // are as much the square's ink as the ring's.
+  thread_local std::vector<int> inside;
+  inside.assign(1, region);
+  for (std::size_t i = 0; i < inside.size(); ++i) {
+    const int* child = tree.children_of(inside[i]);
+    inside.insert(inside.end(), child, child + tree.regions[inside[i]].child_count);
+  }
+  for (int part : inside)
+    tree.for_each_run(part, [&](int y, int rx0, int rx1) {
+      std::fill_n(cls.begin() + std::size_t(y - cy0) * w + (rx0 - cx0), rx1 - rx0, kOwn);
+    });
 
   const int limit = reach * reach;  // a Euclidean radius: twice as accurate at 1 px per unit as the L-infinity ring
   double m = 0, mx = 0, my = 0;

@@ -115,8 +115,8 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
                      const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
                      DetectionStats& stats);
 
-// Centroid of the inverted grey image over `region` and the white pixels within `reach`
-// pixels of it that are nearer to it than to any other black pixel. `white` is the grey
+// Centroid of the inverted grey image over `region` with its holes and the white pixels
+// within `reach` pixels of it that are nearer to it than to any other black pixel. `white` is the grey
 // level that weighs zero (255 for the paper's plain inversion).
 Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary, int reach,
                   double white);

@@ -1,0 +1,62 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+#include "lftag_system.hpp"
+
+#include "experiment.hpp"
+
+namespace bench {
+
+// Random ids over the whole dictionary, as the paper chose LFTag's test markers; built
+// digit by digit, so any family's ids stay exact.
+std::vector<std::string> LftagSystem::marker_ids(int count, std::uint64_t seed) const {
+  std::mt19937_64 rng = seeded(seed, {0x1f7a9, std::uint64_t(family_.n())});
+  std::vector<std::string> ids;
+  for (int i = 0; i < count; ++i) {
+    lftag::TagId id;
+    for (int k = 0; k < family_.data_cell_count(); ++k) id = id.with_digit(k, int(rng() % 4));
+    ids.push_back(id.to_decimal());
+  }
+  return ids;
+}
+
+cv::Mat1b LftagSystem::marker_cells(const std::string& id) const {
+  return family_.unit_bitmap(lftag::TagId::parse(id));
+}
+
+void LftagSystem::set_camera(const lftag::Camera& camera, double tag_size) {
+  lftag::DetectorParams params;
+  params.families = {family_};
+  params.camera = camera;
+  params.tag_size = tag_size;
+  params.upsample = upsample_;
+  detector_ = std::make_unique<lftag::Detector>(params);
+}
+
+std::vector<Detected> LftagSystem::detect(const cv::Mat1b& grey) {
+  lftag::DetectionStats stats;
+  std::vector<Detected> out;
+  for (const lftag::Detection& d : detector_->detect(lftag::ImageView(grey), &stats)) {
+    Detected det;
+    det.id = d.id.to_decimal();
+    det.points.assign(d.keypoints.begin(), d.keypoints.end());
+    det.center = d.center;
+    det.pose = Pose{d.rvec, d.tvec};
+    out.push_back(std::move(det));
+  }
+  stats_ += stats;
+  return out;
+}
+
+std::vector<std::pair<std::string, double>> LftagSystem::counters() const {
+  const lftag::DetectionStats& s = stats_;
+  return {{"frames", double(s.frames)},         {"regions", double(s.regions)},
+          {"topology", double(s.topology)},     {"area", double(s.area)},
+          {"geometry", double(s.geometry)},     {"angle", double(s.angle)},
+          {"collinearity", double(s.collinearity)}, {"residual", double(s.residual)},
+          {"unambiguous", double(s.unambiguous)},   {"decoded", double(s.decoded)},
+          {"threshold_ms", s.threshold_ms},     {"regions_ms", s.regions_ms},
+          {"candidates_ms", s.candidates_ms},   {"keypoints_ms", s.keypoints_ms},
+          {"hypotheses_ms", s.hypotheses_ms},   {"decode_ms", s.decode_ms},
+          {"pose_ms", s.pose_ms},               {"total_ms", s.total_ms()}};
+}
+
+}  // namespace bench

@@ -1,0 +1,37 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// The LFTag detector of this project as a benchmark system: one family per system, the
+// detector's default parameters, on the frame as it is or enlarged twice (far mode).
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "lftag/detector.hpp"
+#include "system.hpp"
+
+namespace bench {
+
+class LftagSystem : public FiducialSystem {
+ public:
+  explicit LftagSystem(int n, int upsample = 1) : family_(n), upsample_(upsample) {}
+
+  std::string name() const override {
+    return "lftag-" + family_.name() + (upsample_ > 1 ? "-up" + std::to_string(upsample_) : "");
+  }
+  std::string family() const override { return "lftag-" + family_.name(); }
+  std::string dictionary_size() const override { return family_.dictionary_size(); }
+  std::vector<std::string> marker_ids(int count, std::uint64_t seed) const override;
+  cv::Mat1b marker_cells(const std::string& id) const override;
+  void set_camera(const lftag::Camera& camera, double tag_size) override;
+  std::vector<Detected> detect(const cv::Mat1b& grey) override;
+  void reset_counters() override { stats_ = {}; }
+  std::vector<std::pair<std::string, double>> counters() const override;
+
+ private:
+  lftag::Family family_;
+  int upsample_;
+  std::unique_ptr<lftag::Detector> detector_;
+  lftag::DetectionStats stats_;
+};
+
+}  // namespace bench
