@@ -7,6 +7,12 @@ root=$(cd "$(dirname "$0")/.." && pwd)
 out="$root/demo-output"
 mkdir -p "$out"
 lftag="$root/build/src/lftag"
+# Debian's interpreter: it has python3-gi and python3-gst-1.0 (a python3 earlier on the
+# PATH, from pyenv say, may not).
+python=/usr/bin/python3
+# GStreamer finds the build's plugin (and keeps its registry in the build).
+export GST_PLUGIN_PATH="$root/build/gst${GST_PLUGIN_PATH:+:$GST_PLUGIN_PATH}"
+export GST_REGISTRY="$root/build/gst-registry.dat"
 
 echo "== Printable markers"
 "$lftag" generate --family 3x3 --id 0-11 --size 50mm --paper a4 --output "$out/sheet-3x3.pdf"
@@ -16,11 +22,17 @@ echo "== Printable markers"
 echo "== A synthetic camera frame with ground truth"
 "$lftag" render --family 3x3 --id 6789 --distance 4 --tilt 35 --roll 20 --noise 2 --light-gradient 0.4 \
   --photo /usr/share/doc/opencv-doc/examples/data/building.jpg --output "$out/scene.png"
-python3 - "$out/scene.json" <<'PY'
+"$python" - "$out/scene.json" <<'PY'
 import json, sys
 truth = json.load(open(sys.argv[1]))
 for m in truth["markers"]:
     print(f"  {m['family']} id {m['id']}: {m['edge_px']:.0f} px across, key points "
           + ", ".join(f"({x:.1f}, {y:.1f})" for x, y in m["keypoints"]))
 PY
-echo "Wrote $(ls "$out" | wc -l) files to $out"
+
+echo "== GStreamer: lftagtestsrc ! lftagdetect overlay=outline+id+axes ! vp8enc ! webmmux"
+echo "   six moving markers at 1280x720 with noise and motion blur, 100 frames of each of"
+echo "   3x3, 4x4 and 6x6; every detection is checked against the truth on its frame"
+"$python" "$root/examples/score-testsrc.py" --families 3x3,4x4,6x6 --frames 100 --count 6 --size 1280x720 \
+  --output "$out/annotated.webm"
+echo "Wrote $(ls "$out" | wc -l) files to $out (the annotated video is annotated.webm)"

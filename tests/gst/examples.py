@@ -1,0 +1,172 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Runs every example in examples/ (the launch lines, annotate-video.py, read-meta.c,
+read-meta.py, score-testsrc.py) on short synthetic videos and checks what they write.
+Reports each case as TAP.
+
+    examples.py SOURCE_ROOT READ_META_EXECUTABLE WORK_DIR
+"""
+import json
+import os
+import subprocess
+import sys
+import traceback
+
+import gi
+
+gi.require_version("Gst", "1.0")
+from gi.repository import Gst  # noqa: E402
+
+root, read_meta, work = sys.argv[1:4]
+examples = os.path.join(root, "examples")
+os.makedirs(work, exist_ok=True)
+Gst.init(None)
+CASES = []
+
+
+def case(function):
+    CASES.append(function)
+    return function
+
+
+def path(name):
+    return os.path.join(work, name)
+
+
+def run(*command, env=None, expect=0):
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600,
+                            env=dict(os.environ, **(env or {})))
+    assert result.returncode == expect, (f"{' '.join(command)} exited {result.returncode}, not {expect}\n"
+                                         f"{result.stdout}\n{result.stderr}")
+    return result
+
+
+def python(script, *args, expect=0):
+    return run(sys.executable, os.path.join(examples, script), *args, expect=expect)
+
+
+def decoded_frames(video):
+    """Width, height and number of frames of a video file, decoded."""
+    pipeline = Gst.parse_launch("filesrc name=in ! decodebin ! videoconvert ! appsink name=out sync=false")
+    pipeline.get_by_name("in").set_property("location", video)
+    sink = pipeline.get_by_name("out")
+    pipeline.set_state(Gst.State.PLAYING)
+    frames, size = 0, None
+    while (sample := sink.emit("try-pull-sample", 60 * Gst.SECOND)) is not None:
+        s = sample.get_caps().get_structure(0)
+        size = (s.get_value("width"), s.get_value("height"))
+        frames += 1
+    pipeline.set_state(Gst.State.NULL)
+    return size, frames
+
+
+def recording():
+    """A recorded video of two 3x3 markers, 6789 and 42: 30 frames at 640x480, VP8."""
+    video = path("recording.webm")
+    if not os.path.exists(video):
+        run("gst-launch-1.0", "-q", "-e", "lftagtestsrc", "num-buffers=30", "ids=6789,42", "!", "videoconvert", "!",
+            "vp8enc", "!", "webmmux", "!", "filesink", f"location={video}")
+    return video
+
+
+@case
+def launch_line_screen():
+    run(os.path.join(examples, "pipelines.sh"), "screen", env={"SINK": "fakesink", "FRAMES": "20"})
+
+
+@case
+def launch_line_testsrc_to_file():
+    run(os.path.join(examples, "pipelines.sh"), "testsrc-to-file", path("testsrc.webm"), env={"FRAMES": "20"})
+    assert decoded_frames(path("testsrc.webm")) == ((1280, 720), 20)
+
+
+@case
+def launch_line_file_to_file():
+    run(os.path.join(examples, "pipelines.sh"), "file-to-file", recording(), path("annotated.webm"))
+    assert decoded_frames(path("annotated.webm")) == ((640, 480), 30)
+    run(os.path.join(examples, "pipelines.sh"), "file-to-file", path("missing.webm"), path("x.webm"), expect=1)
+
+
+@case
+def annotate_video():
+    result = python("annotate-video.py", recording(), "--video", path("annotated.avi"), "--jsonl", path("a.jsonl"))
+    assert "100 %" in result.stderr and "30 frames" in result.stderr, result.stderr
+    assert decoded_frames(path("annotated.avi")) == ((640, 480), 30)
+    lines = [json.loads(line) for line in open(path("a.jsonl"))]
+    assert len(lines) == 30
+    for frame, line in enumerate(lines):
+        assert list(line)[:2] == ["timestamp", "time"] and line["frame"] == frame
+        # WebM keeps timestamps to the millisecond.
+        assert abs(line["timestamp"] - frame * Gst.SECOND / 30) <= Gst.MSECOND, line["timestamp"]
+        assert (line["width"], line["height"]) == (640, 480)
+        for d in line["detections"]:
+            assert d["family"] == "3x3" and d["id"] in (6789, 42), d
+            assert len(d["corners"]) == 4 and len(d["centroids"]) == 9 and len(d["pose"]["tvec"]) == 3
+            assert d["pose"]["calibrated"] is False
+    # Through VP8 at 640x480 both markers are found in (nearly) every frame.
+    found = sum(sorted(d["id"] for d in line["detections"]) == [42, 6789] for line in lines)
+    assert found >= 28, f"both markers in only {found} of 30 frames"
+
+
+@case
+def annotate_video_mistakes():
+    result = python("annotate-video.py", path("missing.mp4"), "--jsonl", path("m.jsonl"), expect=2)
+    assert "missing.mp4" in result.stderr, result.stderr
+    result = python("annotate-video.py", recording(), "--video", path("out.mp4"), expect=2)
+    assert ".webm" in result.stderr, result.stderr
+    result = python("annotate-video.py", recording(), "--jsonl", path("m.jsonl"), "--families", "9x9", expect=1)
+    assert "9x9" in result.stderr, result.stderr
+    # A file that is not a video: decodebin's error, and a failure.
+    result = python("annotate-video.py", os.path.join(examples, "read-meta.c"), "--jsonl", path("m.jsonl"), expect=1)
+    assert "annotate-video:" in result.stderr, result.stderr
+
+
+@case
+def read_meta_in_c():
+    lines = run(read_meta).stdout.splitlines()
+    assert len(lines) == 31 and lines[-1] == "30 frames", lines[-3:]
+    assert all("3 marker(s): 3x3" in line and line.count("3x3") == 3 for line in lines[:-1]), lines[:3]
+    source = f"filesrc location={recording()} ! decodebin ! videoconvert"
+    lines = run(read_meta, source).stdout.splitlines()
+    assert lines[-1] == "30 frames" and "3x3 6789 at" in lines[0] and "3x3 42 at" in lines[0], lines[:2]
+    assert "(uncalibrated)" in lines[0]
+    run(read_meta, "no-such-element", expect=1)
+
+
+@case
+def read_meta_in_python():
+    lines = python("read-meta.py").stdout.splitlines()
+    metas = [line for line in lines if line.startswith("meta ")]
+    messages = [line for line in lines if line.startswith("message ")]
+    assert len(metas) == 30 and len(messages) == 30, lines[:4]
+    # Each frame's message tells what its meta does.
+    for meta, message in zip(metas, messages):
+        time, markers = meta.split()[1], meta.split(": ", 1)[1]
+        assert message.startswith(f"message {time} (running time {time}): {markers}"), (meta, message)
+        assert markers.count("3x3") == 3
+
+
+@case
+def score_testsrc():
+    result = python("score-testsrc.py", "--families", "3x3,4x4", "--frames", "20", "--count", "3", "--size",
+                    "640x480", "--output", path("scored.webm"))
+    rows = {line.split()[0]: line.split() for line in result.stdout.splitlines()[1:4]}
+    assert set(rows) == {"3x3", "4x4", "all"}, result.stdout
+    frames, visible, found, rate, wrong = rows["all"][1], rows["all"][2], rows["all"][3], rows["all"][4], rows["all"][6]
+    assert frames == "40" and wrong == "0" and int(visible) >= 100 and float(rate) >= 95, result.stdout
+    assert decoded_frames(path("scored.webm")) == ((640, 480), 40)
+    python("score-testsrc.py", "--families", "3x3,10x10", expect=2)
+
+
+print(f"1..{len(CASES)}")
+failed = 0
+for number, function in enumerate(CASES, 1):
+    try:
+        function()
+        print(f"ok {number} - {function.__name__}", flush=True)
+    except Exception:  # noqa: BLE001 - every failure is reported, then the next case runs
+        failed += 1
+        print(f"not ok {number} - {function.__name__}")
+        for line in traceback.format_exc().splitlines():
+            print("# " + line, flush=True)
+raise SystemExit(1 if failed else 0)
