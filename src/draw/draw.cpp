@@ -31,7 +31,10 @@ void label(cv::Mat& image, const std::string& text, cv::Point2d centre, double h
   const int thick = std::max(1, int(std::round(scale * 1.6)));
   int base = 0;
   const cv::Size size = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, scale, thick, &base);
-  const cv::Point at(cvRound(centre.x - size.width / 2.0), cvRound(centre.y + size.height / 2.0));
+  // Centred on the marker, but shifted to stay inside the frame (long 8x8 ids, markers at the edge).
+  const int x = std::clamp(cvRound(centre.x - size.width / 2.0), 0, std::max(0, image.cols - size.width));
+  const int y = std::clamp(cvRound(centre.y + size.height / 2.0), size.height, std::max(size.height, image.rows - base));
+  const cv::Point at(x, y);
   cv::putText(image, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, colour(image, 0, 0, 0), thick + 2 * width,
               cv::LINE_AA);
   cv::putText(image, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, colour(image, 255, 255, 255), thick, cv::LINE_AA);
