@@ -417,7 +417,8 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
   g_object_class_install_property (gobject_class, PROP_MAX_AREA_RATIO,
       g_param_spec_double ("max-area-ratio", "Maximum area ratio",
           "tau1: a candidate is rejected when its largest black square is larger "
-          "than this many times its smallest (the design ratio is 1.78)",
+          "than this many times its smallest, once perspective is taken out (the "
+          "design ratio is 1.78)",
           1.0, 100.0, defaults.max_area_ratio, playing));
   g_object_class_install_property (gobject_class, PROP_MIN_SPREAD_RATIO,
       g_param_spec_double ("min-spread-ratio", "Minimum spread ratio",

@@ -46,6 +46,7 @@ void DetectorParams::validate() const {
   if (threshold_offset < 0 || threshold_offset > 255) fail("threshold offset must be 0 to 255");
   if (upsample != 1 && upsample != 2) fail("upsample must be 1 or 2");
   if (!(noise_fraction >= 0 && noise_fraction < 1)) fail("noise fraction must be in [0, 1)");
+  if (!(noise_ratio >= 1)) fail("the noise ratio must be at least 1");
   if (max_extra_children < 0 || max_extra_children > 64) fail("extra children must be 0 to 64");
   if (dilation < 0 || dilation > 8) fail("dilation must be 0 to 8 pixels");
   if (!(max_area_ratio >= 1)) fail("the area ratio (tau1) must be at least 1");

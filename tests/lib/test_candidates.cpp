@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <set>
 #include <string>
@@ -462,10 +463,9 @@ TEST(FindCandidates, NoiseChildrenAreIgnored) {
 
 TEST(FindCandidates, ChildrenTooSmallBesideTheLargestAreNoise) {
   // Eight 12 x 12 squares, one 30 x 30 and four 7 x 7 extras (49 px, above the 15 px bound
-  // from the white area): with tau1 = 7 the bound from the largest child is 900 / 14 = 64.3
-  // px, so the extras are noise and the room is a candidate; with tau1 = 5.5 the big square
-  // is too heavy for the area constraint, and with a huge tau1 the extras count, making 13
-  // children.
+  // from the white area): with noise_ratio = 14 the bound from the largest child is
+  // 900 / 14 = 64.3 px, so the extras are noise and the room is a candidate; with
+  // noise_ratio = 100 (9 px) the extras count, making 13 children.
   std::vector<cv::Rect> all = grid(12, 28, 12);
   all[8] = cv::Rect(62, 62, 30, 30);
   for (int i = 0; i < 4; ++i) all.emplace_back(6 + 16 * i, 4, 7, 7);
@@ -475,26 +475,21 @@ TEST(FindCandidates, ChildrenTooSmallBesideTheLargestAreNoise) {
   ASSERT_EQ(a.tree.regions[room].child_count, 13);
   ASSERT_GT(49, a.tree.regions[room].area / 500.0);
   DetectorParams p = params_for({Family(3)});
-  p.max_area_ratio = 7;
+  p.noise_ratio = 14;
   DetectionStats stats;
   const std::vector<Candidate> out = run(a, p, stats);
   ASSERT_EQ(out.size(), 1u);
   for (const Blob& b : out[0].blobs) EXPECT_GE(b.area, 144);
-  p.max_area_ratio = 5.5;  // 900 / 11 = 81.8: still noise, but 900 / 144 > 5.5
+  p.noise_ratio = 100;
   DetectionStats s2;
   EXPECT_TRUE(run(a, p, s2).empty());
-  EXPECT_EQ(s2.topology, 1);
-  EXPECT_EQ(s2.area, 0);
-  p.max_area_ratio = 100;  // 900 / 200 = 4.5 px: the extras count
-  DetectionStats s3;
-  EXPECT_TRUE(run(a, p, s3).empty());
-  EXPECT_EQ(s3.topology, 0);
+  EXPECT_EQ(s2.topology, 0);
 }
 
 TEST(FindCandidates, ChildrenAtTheNoiseBoundCount) {
-  // Nine 12 x 12 squares and tau1 = 9, with no bound from the white area: the bound is
-  // 144 / 18 = 8 px exactly. Four extra children of 8 px are children (13 > 9 + 3: no
-  // candidate), four of 7 px are noise (a candidate).
+  // Nine 12 x 12 squares and noise_ratio = 18, with no bound from the white area: the
+  // bound is 144 / 18 = 8 px exactly. Four extra children of 8 px are children
+  // (13 > 9 + 3: no candidate), four of 7 px are noise (a candidate).
   for (const auto& [w, h, kept] : {std::tuple{2, 4, true}, std::tuple{1, 7, false}}) {
     std::vector<cv::Rect> all = grid(12, 28, 12);
     for (int i = 0; i < 4; ++i) all.emplace_back(6 + 16 * i, 4, w, h);
@@ -502,7 +497,7 @@ TEST(FindCandidates, ChildrenAtTheNoiseBoundCount) {
     ASSERT_EQ(a.tree.regions[a.at(10, 20)].child_count, 13);
     DetectorParams p = params_for({Family(3)});
     p.noise_fraction = 0;
-    p.max_area_ratio = 9;
+    p.noise_ratio = 18;
     DetectionStats stats;
     EXPECT_EQ(run(a, p, stats).size(), kept ? 0u : 1u) << w * h << " px";
     EXPECT_EQ(stats.topology, kept ? 0 : 1) << w * h << " px";
@@ -570,44 +565,38 @@ TEST(FindCandidates, TheNSquaredLargestChildrenAreKept) {
 }
 
 TEST(FindCandidates, AreaConstraintOnTheBlobsInk) {
-  // Eight 6 x 6 squares and one bigger square: the ink ratio is the area ratio (crisp
-  // pixels, ring at the white level), and tau1 = 5 accepts 180 / 36 but not 181 / 36.
+  // Eight 6 x 6 squares and one bigger square. The ink is the area (crisp pixels, ring at
+  // the white level); the constraint divides it by a plane fitted to the cube roots of the
+  // inks over the centroids, cubed, which takes up part of a lone heavy square: largest
+  // over smallest normalised ink is 2.04 for 12 x 12, 4.09 for 20 x 20, 5.57 for 24 x 24.
   struct Case {
-    std::vector<cv::Rect> big;
-    double ratio;
+    int side;
+    double normalised;
   };
-  const std::vector<Case> cases = {
-      {{cv::Rect(60, 60, 18, 10)}, 5.0},
-      {{cv::Rect(60, 60, 18, 10), cv::Rect(60, 70, 1, 1)}, 181.0 / 36},
-      {{cv::Rect(60, 60, 18, 17)}, 306.0 / 36},
-      {{cv::Rect(60, 60, 12, 12)}, 4.0},
-  };
-  for (const Case& k : cases) {
+  for (const Case& k : {Case{12, 2.04}, Case{20, 4.09}, Case{24, 5.57}}) {
     std::vector<cv::Rect> all;
     for (int i = 0; i < 8; ++i) all.emplace_back(10 + (i % 4) * 20, 10 + (i / 4) * 20, 6, 6);
-    all.insert(all.end(), k.big.begin(), k.big.end());
+    all.emplace_back(60, 60, k.side, k.side);
     const Analysed a = analyse(boxed(100, 3, all));
-    SCOPED_TRACE("ratio " + std::to_string(k.ratio));
+    SCOPED_TRACE("side " + std::to_string(k.side));
     ASSERT_EQ(a.tree.regions[a.at(10, 10)].child_count, 9);
-    DetectionStats stats;
-    const std::vector<Candidate> out = run(a, params_for({Family(3)}), stats);
-    EXPECT_EQ(stats.topology, 1);
-    if (k.ratio <= 5.0) {
-      ASSERT_EQ(out.size(), 1u);
+    for (double tau1 : {k.normalised - 0.02, k.normalised + 0.02}) {
+      DetectorParams p = params_for({Family(3)});
+      p.max_area_ratio = tau1;
+      DetectionStats stats;
+      const std::vector<Candidate> out = run(a, p, stats);
+      EXPECT_EQ(stats.topology, 1);
+      if (tau1 < k.normalised) {
+        EXPECT_TRUE(out.empty()) << tau1;
+        EXPECT_EQ(stats.area, 0) << tau1;
+        continue;
+      }
+      ASSERT_EQ(out.size(), 1u) << tau1;
+      EXPECT_EQ(stats.area, 1);
       double lo = 1e300, hi = 0;
       for (const Blob& b : out[0].blobs) lo = std::min(lo, b.mass), hi = std::max(hi, b.mass);
-      EXPECT_DOUBLE_EQ(hi / lo, k.ratio);
-      EXPECT_EQ(stats.area, 1);
-    } else {
-      EXPECT_TRUE(out.empty());
-      EXPECT_EQ(stats.area, 0);
+      EXPECT_DOUBLE_EQ(hi / lo, k.side * k.side / 36.0);  // the raw ink ratio
     }
-    // A looser tau1 lets every case through.
-    DetectorParams loose = params_for({Family(3)});
-    loose.max_area_ratio = 9;
-    DetectionStats s2;
-    EXPECT_EQ(run(a, loose, s2).size(), 1u);
-    EXPECT_EQ(s2.area, 1);
   }
   // A real marker (design ratio 16/9) passes, also at a small scale.
   for (double ppu : {1.7, 3.0, 8.0}) {
@@ -616,6 +605,28 @@ TEST(FindCandidates, AreaConstraintOnTheBlobsInk) {
     EXPECT_EQ(run(m, params_for({Family(4)}), stats).size(), 1u) << ppu << " px/u";
     EXPECT_EQ(stats.area, 1) << ppu << " px/u";
   }
+}
+
+TEST(FindCandidates, AreaConstraintTakesOutPerspective) {
+  // Columns of squares 5, 8 and 12 px wide: the raw ink ratio 144 / 25 = 5.76 is over
+  // tau1 = 5, but the cube roots of the inks grow nearly linearly across the grid, as
+  // perspective makes them, and the normalised ratio is 1.06. The same squares out of
+  // order (5, 12, 8) are no perspective: 3.73.
+  auto columns = [](std::array<int, 3> sides) {
+    std::vector<cv::Rect> all;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) all.emplace_back(10 + c * 28, 10 + r * 28, sides[c], sides[c]);
+    return analyse(boxed(100, 3, all));
+  };
+  DetectorParams p = params_for({Family(3)});
+  DetectionStats stats;
+  EXPECT_EQ(run(columns({5, 8, 12}), p, stats).size(), 1u);
+  p.max_area_ratio = 1.1;
+  EXPECT_EQ(run(columns({5, 8, 12}), p, stats).size(), 1u);
+  p.max_area_ratio = 3.7;
+  EXPECT_TRUE(run(columns({5, 12, 8}), p, stats).empty());
+  p.max_area_ratio = 3.75;
+  EXPECT_EQ(run(columns({5, 12, 8}), p, stats).size(), 1u);
 }
 
 TEST(FindCandidates, FamiliesShareTheRegionTree) {

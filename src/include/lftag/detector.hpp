@@ -64,9 +64,12 @@ struct DetectorParams {
 
   // -- Candidates: a white region with at least n^2 black children. Children smaller than
   //    `noise_fraction` of the white region's area, or than the largest child over
-  //    2 max_area_ratio, are noise; at most n^2 + max_extra_children children remain, of
-  //    which the n^2 largest are kept.
+  //    `noise_ratio`, are noise; at most n^2 + max_extra_children children remain, of
+  //    which the n^2 largest are kept. The largest square is 16/9 of the smallest by
+  //    design and up to about 14 times under the steepest perspective we decode (80
+  //    degrees at 1.5 tag sizes from the camera).
   double noise_fraction = 1.0 / 500;
+  double noise_ratio = 40;
   int max_extra_children = 3;
 
   // -- Vertex estimation: centroids of the inverted grey image over each black region
@@ -75,7 +78,9 @@ struct DetectorParams {
   CentroidReference centroid_reference = CentroidReference::local_white;
 
   // -- Constraints.
-  double max_area_ratio = 5.0;  // tau1: largest / smallest blob (design ratio 16/9)
+  // tau1: largest / smallest blob ink (design ratio 16/9), once the perspective's
+  // growth of area across the marker is taken out (a plane fitted to the cube roots).
+  double max_area_ratio = 5.0;
   // tau2, scale-free: reject near-collinear blobs whose centroid scatter has a smaller
   // to larger principal axis ratio (sqrt of the eigenvalue ratio) below this.
   double min_spread_ratio = 0.1;
