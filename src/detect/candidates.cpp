@@ -33,9 +33,13 @@ double white_level(const RegionTree& tree, int region, const ImageView& image) {
 // fitted to the cube roots of the inks and each ink is divided by its plane value cubed.
 // Face-on this is the design's 16/9 or less; tilted 60 degrees at two tag sizes the raw
 // ratio already passes 6, while this stays near the design's.
-double ink_spread(const std::vector<Blob>& blobs) {
+// Each blob keeps its normalised ink as relative_ink (its raw ink when no plane fits).
+double ink_spread(std::vector<Blob>& blobs) {
   double lo = 1e300, hi = 0;
-  for (const Blob& b : blobs) lo = std::min(lo, b.mass), hi = std::max(hi, b.mass);
+  for (Blob& b : blobs) {
+    b.relative_ink = b.mass;
+    lo = std::min(lo, b.mass), hi = std::max(hi, b.mass);
+  }
   if (!(lo > 0)) return HUGE_VAL;
   cv::Point2d mean;
   for (const Blob& b : blobs) mean += b.centroid;
@@ -48,14 +52,15 @@ double ink_spread(const std::vector<Blob>& blobs) {
     rhs += row * std::cbrt(b.mass);
   }
   const Eigen::Vector3d plane = normal.ldlt().solve(rhs);
-  double nlo = 1e300, nhi = 0;
+  std::vector<double> ink;
   for (const Blob& b : blobs) {
     const double scale = plane[0] + plane[1] * (b.centroid.x - mean.x) + plane[2] * (b.centroid.y - mean.y);
     if (!(scale > 0)) return hi / lo;  // no sensible plane: the raw ratio
-    const double ink = b.mass / (scale * scale * scale);
-    nlo = std::min(nlo, ink), nhi = std::max(nhi, ink);
+    ink.push_back(b.mass / (scale * scale * scale));
   }
-  return nhi / nlo;
+  for (std::size_t i = 0; i < blobs.size(); ++i) blobs[i].relative_ink = ink[i];
+  const auto [nlo, nhi] = std::minmax_element(ink.begin(), ink.end());
+  return *nhi / *nlo;
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // The chain of stages, with timing and the false-positive funnel.
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -145,9 +146,19 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       trace->candidates.push_back(centroids);
     }
     start = Clock::now();
-    const std::vector<detail::KeyPoints> sides = detail::find_keypoints(c, p, stats);
+    std::vector<detail::KeyPoints> sides = detail::find_keypoints(c, p, stats);
+    // The side whose K0 and K1 carry the most ink (perspective taken out) is most likely
+    // the baseline: decoding it first usually spares the other three.
+    const auto baseline_ink = [&](const detail::KeyPoints& k) {
+      return c.blobs[k.blob[0]].relative_ink + c.blobs[k.blob[1]].relative_ink;
+    };
+    std::stable_sort(sides.begin(), sides.end(), [&](const detail::KeyPoints& a, const detail::KeyPoints& b) {
+      return baseline_ink(a) > baseline_ink(b);
+    });
     stats.keypoints_ms += elapsed_ms(start);
-    // Of the decodings of the hull's sides, the one whose squares' ink matches the design.
+    // The first decoding of a hull side whose squares' ink matches the design: a wrong side
+    // puts squares of the wrong size in the baseline's and data cells' places (spread 2 to
+    // 3), so no two sides pass.
     std::optional<detail::KeyPoints> k;
     std::optional<detail::Decoding> d;
     std::array<bool, 2> passed{};  // residual, margin: for any side
@@ -162,10 +173,10 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       if (!decoded) continue;
       passed[0] |= decoded->verdict != detail::Verdict::residual;
       passed[1] |= decoded->verdict == detail::Verdict::accepted;
-      if (decoded->verdict == detail::Verdict::accepted && decoded->ink_spread <= p.max_ink_spread &&
-          (!d || decoded->ink_spread < d->ink_spread)) {
+      if (decoded->verdict == detail::Verdict::accepted && decoded->ink_spread <= p.max_ink_spread) {
         d = decoded;
         k = side;
+        break;
       }
     }
     stats.residual += passed[0], stats.unambiguous += passed[1];

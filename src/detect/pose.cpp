@@ -2,7 +2,7 @@
 // Final pose (paper IV-I): PnP on all n^2 centroids, IPPE then Levenberg-Marquardt.
 // A blob's centroid is the centroid of its projected square, which perspective moves off
 // the projection of the square's centre; one correction with the first pose removes
-// that bias before the final refinement.
+// that bias before the refinement.
 #include <cmath>
 
 #include <opencv2/calib3d.hpp>
@@ -29,18 +29,19 @@ bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, 
   try {
     if (!cv::solvePnP(object, image, k, cv::noArray(), rvec, tvec, false, cv::SOLVEPNP_IPPE)) return false;
     if (params.refine_pose) {
-      cv::solvePnPRefineLM(object, image, k, cv::noArray(), rvec, tvec);
       // Move each observation from the centroid of the projected square to the
-      // projection of its centre, as the pose predicts, and refine again.
-      std::vector<cv::Point2d> centres, corrected = image;
+      // projection of its centre, as the IPPE pose predicts (the bias is small beside
+      // the pose's error, so the first pose is good enough for it), and refine.
+      std::vector<cv::Point3d> corners;
+      for (const UnitRect& s : squares)
+        for (const cv::Point2d u : {cv::Point2d(s.x, s.y), cv::Point2d(s.x + s.width, s.y),
+                                    cv::Point2d(s.x + s.width, s.y + s.height), cv::Point2d(s.x, s.y + s.height)})
+          corners.push_back(f.to_marker_frame(u, size));
+      std::vector<cv::Point2d> centres, quads, corrected = image;
       cv::projectPoints(object, rvec, tvec, k, cv::noArray(), centres);
+      cv::projectPoints(corners, rvec, tvec, k, cv::noArray(), quads);
       for (int g = 0; g < f.cell_count(); ++g) {
-        const UnitRect& s = squares[g];
-        const std::vector<cv::Point3d> corners = {
-            f.to_marker_frame({s.x, s.y}, size), f.to_marker_frame({s.x + s.width, s.y}, size),
-            f.to_marker_frame({s.x + s.width, s.y + s.height}, size), f.to_marker_frame({s.x, s.y + s.height}, size)};
-        std::vector<cv::Point2d> quad;
-        cv::projectPoints(corners, rvec, tvec, k, cv::noArray(), quad);
+        const std::vector<cv::Point2d> quad(quads.begin() + 4 * g, quads.begin() + 4 * g + 4);
         corrected[g] -= polygon_centroid(quad) - centres[g];
       }
       cv::solvePnPRefineLM(object, corrected, k, cv::noArray(), rvec, tvec);

@@ -98,6 +98,7 @@ struct Blob {
   int region = -1;
   int area = 0;          // pixels
   double mass = 0;       // zeroth moment of the inverted grey image over the dilated region
+  double relative_ink = 0;  // mass over what perspective alone gives it (see find_candidates)
   cv::Point2d centroid;  // image pixels, as observed (distorted)
   cv::Point2d point;     // undistorted pixels, for geometry
 };
