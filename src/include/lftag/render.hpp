@@ -84,7 +84,9 @@ struct SceneMarker {
 SceneTarget to_target(const SceneMarker& marker);
 
 struct SceneParams {
-  Camera camera;                 // width and height give the frame size
+  // Width and height give the frame size; the default is the LFTag paper's simulation
+  // camera (640x480, fx = fy = 320).
+  Camera camera = Camera::pinhole(320, 320, 319.5, 239.5, 640, 480);
   int supersample = 8;           // samples per pixel edge where a pixel straddles an edge
   double background = 0.5;       // flat background albedo (when no photo)
   cv::Mat photo;                 // optional background photo, scaled to cover the frame
