@@ -1,0 +1,148 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""Prints the result tables of docs/BENCHMARKS.md (Markdown) from a results directory, so
+that the document is written from the numbers, not retyped.
+
+    tables.py RESULTS_DIR
+"""
+import csv
+import statistics
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+# The LFTag paper's published figures (SPEC section 4), beside ours.
+PAPER_RANGE = {"tag36h11": (23.4, 23.9), "tagStandard41h12": (17.5, 21.7), "lftag-3x3": (27.8, 27.8),
+               "lftag-4x4": (21.7, 21.7)}
+PAPER_ANGLE = {"lftag-3x3": 77.5, "lftag-4x4": 76.0, "tag36h11": 77.5}
+
+
+def read(results, name):
+    path = results / name
+    if not path.exists():
+        return []
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def table(header, rows):
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def paper(figures, family, index=None):
+    value = figures.get(family)
+    if value is None:
+        return ""
+    return f"{value[index]:g}" if index is not None else f"{value:g}"
+
+
+def range_table(results):
+    rows = []
+    for r in read(results, "range_summary.csv"):
+        rows.append([r["system"], f"{int(r['dictionary_size']):,}" if len(r["dictionary_size"]) < 16
+                     else f"{float(r['dictionary_size']):.1e}", r["first_missed_m"], r["missed20_m"], r["last_found_m"],
+                     r["wrong"], paper(PAPER_RANGE, r["family"], 0), paper(PAPER_RANGE, r["family"], 1)])
+    return table(["system", "dictionary", "first missed (m)", "20 % missed (m)", "last found (m)", "wrong ids",
+                  "paper: first", "paper: 20 %"], rows)
+
+
+def angle_table(results):
+    rows = [[r["system"], r["first_missed_deg"], r["missed20_deg"], r["last_found_deg"], r["wrong"],
+             paper(PAPER_ANGLE, r["family"])] for r in read(results, "angle_summary.csv")]
+    return table(["system", "first missed (deg)", "20 % missed (deg)", "last found (deg)", "wrong ids",
+                  "paper: first"], rows)
+
+
+def blur_table(results):
+    by_system = defaultdict(dict)
+    for r in read(results, "blur_summary.csv"):
+        by_system[r["system"]][float(r["blur_angle_deg"])] = float(r["max_fraction_all_found"])
+    rows = []
+    for system, angles in by_system.items():
+        values = [angles[a] for a in sorted(angles)]
+        rows.append([system] + [f"{100 * angles.get(a, float('nan')):.0f} %" for a in (0.0, 45.0, 90.0)]
+                    + [f"{100 * min(values):.0f} %"])
+    return table(["system", "0 deg (vertical)", "45 deg", "90 deg (horizontal)", "worst angle"], rows)
+
+
+def pose_table(results):
+    rows = []
+    wanted = {("distance", "2"), ("distance", "10"), ("distance", "15"), ("tilt", "0"), ("tilt", "45"), ("tilt", "75")}
+    by_system = defaultdict(dict)
+    for r in read(results, "pose_summary.csv"):
+        step = r["distance_m"] if r["sweep"] == "distance" else r["tilt_deg"]
+        if (r["sweep"], step) in wanted and r["median_rotation_deg"] and r["median_translation_rel"]:
+            by_system[r["system"]][(r["sweep"], step)] = (float(r["median_rotation_deg"]),
+                                                          100 * float(r["median_translation_rel"]))
+    order = [("distance", "2"), ("distance", "10"), ("distance", "15"), ("tilt", "0"), ("tilt", "45"), ("tilt", "75")]
+    for system, steps in by_system.items():
+        rows.append([system] + [f"{steps[s][0]:.3f} / {steps[s][1]:.3f}" if s in steps else "-" for s in order])
+    return table(["system", "2 m", "10 m", "15 m", "3 m, tilt 0", "tilt 45", "tilt 75"], rows)
+
+
+def fp_table(results):
+    totals = defaultdict(lambda: [0, 0, 0])
+    for r in read(results, "fp_summary.csv"):
+        t = totals[r["system"]]
+        t[0] += int(r["frames"])
+        t[1] += int(r["false_positives"])
+        t[2] += int(r["frames_with_false_positives"])
+    return table(["system", "frames", "false positives", "frames with any"],
+                 [[s, f"{t[0]:,}", f"{t[1]:,}", f"{t[2]:,}"] for s, t in totals.items()])
+
+
+def funnel_table(results):
+    stages = ["regions", "topology", "area", "geometry", "angle", "collinearity", "residual", "unambiguous", "decoded"]
+    sums = defaultdict(float)
+    for r in read(results, "fp_counters.csv"):
+        sums[(r["system"], r["counter"])] += float(r["value"])
+    systems = sorted({s for s, _ in sums if s.startswith("lftag-") and not s.endswith("up2")})
+    return table(["constraint"] + systems, [[stage] + [f"{int(sums[(s, stage)]):,}" for s in systems]
+                                           for stage in stages])
+
+
+def speed_table(results):
+    rows = [r for r in read(results, "speed.csv")]
+    keys = [("scenes", "1280"), ("video", "1280"), ("scenes", "1920"), ("video", "1920")]
+    times = defaultdict(dict)
+    for r in rows:
+        times[r["system"]][(r["set"], r["width"])] = float(r["median_ms"])
+    out = []
+    for system, t in times.items():
+        out.append([system] + [f"{t[k]:.2f}" if k in t else "-" for k in keys])
+    return table(["system (ms per frame, median)", "scenes 720p", "video 720p", "scenes 1080p", "video 1080p"], out)
+
+
+def stage_table(results):
+    stages = ["threshold_ms", "regions_ms", "candidates_ms", "keypoints_ms", "hypotheses_ms", "decode_ms", "pose_ms",
+              "total_ms"]
+    values = defaultdict(dict)
+    for r in read(results, "speed_counters.csv"):
+        if r["set"] == "scenes" and r["system"] in ("lftag-3x3", "lftag-4x4"):
+            values[(r["system"], r["width"])][r["counter"]] = float(r["per_frame"])
+    columns = [("lftag-3x3", "1280"), ("lftag-4x4", "1280"), ("lftag-3x3", "1920")]
+    label = {"1280": "720p", "1920": "1080p"}
+    return table(["stage (mean ms per frame)"] + [f"{s} {label[w]}" for s, w in columns],
+                 [[stage.removesuffix("_ms")] + [f"{values[c].get(stage, float('nan')):.3f}" for c in columns]
+                  for stage in stages])
+
+
+def throughput_table(results):
+    rows = [[r["size"], r["variant"], r["fps"], r["ms_per_frame"], r["ms_over_identity"]]
+            for r in read(results, "throughput.csv")]
+    return table(["frame", "element", "frames per second", "ms per frame", "ms over identity"], rows)
+
+
+def main(results):
+    results = Path(results)
+    for title, make in [("Range", range_table), ("Grazing angle", angle_table), ("Motion blur", blur_table),
+                        ("Pose (median rotation deg / translation % of distance)", pose_table),
+                        ("False positives", fp_table), ("Funnel", funnel_table), ("Speed", speed_table),
+                        ("Stages", stage_table), ("Throughput", throughput_table)]:
+        print(f"### {title}\n\n{make(results)}\n")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
