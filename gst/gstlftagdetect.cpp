@@ -412,7 +412,7 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
   g_object_class_install_property (gobject_class, PROP_UPSAMPLE,
       g_param_spec_int ("upsample", "Upsample",
           "1, or 2 to detect on the frame enlarged twice: far and steeply tilted "
-          "markers are found further away, at about four times the cost",
+          "markers are found further away, at five to six times the cost",
           1, 2, defaults.upsample, playing));
   g_object_class_install_property (gobject_class, PROP_MAX_AREA_RATIO,
       g_param_spec_double ("max-area-ratio", "Maximum area ratio",

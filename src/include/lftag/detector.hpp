@@ -58,7 +58,7 @@ struct DetectorParams {
   int threshold_window = 16;  // M (paper: 16)
   int threshold_offset = 4;   // grey levels
   // 1, or 2 to detect on the frame enlarged twice (bicubic): far and steeply tilted
-  // markers keep their structure longer (see the README for the figures) at about four
+  // markers keep their structure longer (see the README for the figures) at five to six
   // times the cost. Results are in the frame's own pixels either way.
   int upsample = 1;
 
