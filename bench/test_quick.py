@@ -4,7 +4,7 @@
 
     test_quick.py LFTAG_BENCH PLOT_PY WORK_DIR
 
-Runs every experiment in quick mode, then the plots, and fails when the program fails
+Runs every experiment in quick mode, then the plots and the tables, and fails when the program fails
 (its "check" experiment fails when a system misses its own markers at 2 m, gets their ids,
 centres or poses wrong), when a result file is missing or malformed, or when a peer is
 not found at the range sweep's first distance. It asserts nothing about speed.
@@ -85,7 +85,19 @@ def main(bench, plot, work):
     for name in PLOTS:
         if not (work / name).exists() or (work / name).stat().st_size == 0:
             fail(f"plot {name} was not written")
-    print("bench quick run: all results and plots written")
+    # The tables of docs/BENCHMARKS.md, from the same files (tables.py sits beside plot.py).
+    tables = Path(plot).with_name("tables.py")
+    run = subprocess.run([sys.executable, str(tables), str(work)], capture_output=True, text=True)
+    if run.returncode != 0:
+        fail(f"tables.py exited with {run.returncode}: {run.stderr}")
+    for section in ("Range", "Grazing angle", "Motion blur", "False positives", "Funnel", "Speed", "Stages"):
+        heading = f"### {section}"
+        body = run.stdout.split(heading, 1)[1].split("###", 1)[0] if heading in run.stdout else ""
+        if SYSTEMS[0] not in body and section not in ("Funnel", "Stages"):
+            fail(f"tables.py: no {section} table with {SYSTEMS[0]} in it")
+        if "| " not in body:
+            fail(f"tables.py: no {section} table")
+    print("bench quick run: all results, plots and tables written")
 
 
 if __name__ == "__main__":
