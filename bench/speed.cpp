@@ -7,6 +7,7 @@
 // labelling its binary image with each algorithm OpenCV offers.
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <map>
 
 #include <opencv2/imgcodecs.hpp>
@@ -201,6 +202,21 @@ bool run_speed(const Options& options) {
         for (const std::string& b : rows)
           if (a != b)
             ratios_csv.row(set, size.width, size.height, a, b, quantile(samples[a], 0.5) / quantile(samples[b], 0.5));
+
+      // The medians and the ratios users ask for first, on the terminal.
+      const std::vector<std::string> peers = {"apriltag-36h11-d2", "apriltag-36h11-d1", "ccl-fastest"};
+      std::printf("%s %dx%d: median ms per frame, and its ratio to", set.c_str(), size.width, size.height);
+      for (const std::string& peer : peers)
+        if (samples.count(peer)) std::printf(" %s", peer.c_str());
+      std::printf("\n");
+      for (const std::string& name : rows) {
+        const double median = quantile(samples[name], 0.5);
+        std::printf("  %-20s %9.3f", name.c_str(), median);
+        for (const std::string& peer : peers)
+          if (samples.count(peer)) std::printf(" %9.3f", median / quantile(samples[peer], 0.5));
+        std::printf("\n");
+      }
+      std::fflush(stdout);
     }
   }
   return true;
