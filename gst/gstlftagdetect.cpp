@@ -84,6 +84,7 @@
 #include <lftag/detector.hpp>
 #include <lftag/draw.hpp>
 
+#include "elementcamera.h"
 #include "lftagmeta.h"
 
 GST_DEBUG_CATEGORY_STATIC (gst_lftag_detect_debug);
@@ -237,22 +238,11 @@ parse_distortion (const std::string & text)
   return values;
 }
 
-/* The camera for a frame: the calibration file, else fx..cy and the distortion,
- * else the default (uncalibrated). Throws when the calibration cannot fit the frame. */
-Camera
-frame_camera (const DetectorSettings & s, const std::optional<Camera> & calibration,
-    int width, int height)
+/* The hand-set camera of the settings. */
+static lftag::gst::PinholeSettings
+pinhole (const DetectorSettings & s)
 {
-  if (calibration)
-    return calibration->for_frame (width, height);
-  if (s.fx > 0) {
-    Camera camera = Camera::pinhole (s.fx, s.fy > 0 ? s.fy : s.fx,
-        s.cx > 0 ? s.cx : (width - 1) / 2.0, s.cy > 0 ? s.cy : (height - 1) / 2.0,
-        width, height);
-    camera.distortion = s.distortion;
-    return camera;
-  }
-  return Camera::default_for (width, height);
+  return {s.fx, s.fy, s.cx, s.cy, s.distortion};
 }
 
 lftag::DetectorParams
@@ -674,18 +664,9 @@ gst_lftag_detect_start (GstBaseTransform * trans)
   if (s.calibration_file.empty ())
     return TRUE;
 
+  if (!lftag::gst::load_calibration (GST_ELEMENT (self), s.calibration_file, st.calibration))
+    return FALSE;
   const gchar *path = s.calibration_file.c_str ();
-  if (!g_file_test (path, G_FILE_TEST_IS_REGULAR)) {
-    GST_ELEMENT_ERROR (self, RESOURCE, NOT_FOUND,
-        ("Calibration file \"%s\" does not exist.", path), (nullptr));
-    return FALSE;
-  }
-  try {
-    st.calibration = Camera::load (s.calibration_file);
-  } catch (const std::exception & e) {
-    GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS, ("Invalid %s.", e.what ()), (nullptr));
-    return FALSE;
-  }
   GST_INFO_OBJECT (self, "calibration from %s: fx %g fy %g cx %g cy %g, %dx%d", path,
       st.calibration->fx, st.calibration->fy, st.calibration->cx, st.calibration->cy,
       st.calibration->width, st.calibration->height);
@@ -715,7 +696,7 @@ gst_lftag_detect_set_info (GstVideoFilter * filter, GstCaps *, GstVideoInfo * in
 
   /* A calibration for another shape of frame fails here, not frame after frame. */
   try {
-    frame_camera (s.detector, st.calibration, width, height);
+    lftag::gst::frame_camera (pinhole (s.detector), st.calibration, width, height);
   } catch (const std::exception & e) {
     GST_ELEMENT_ERROR (self, CORE, NEGOTIATION,
         ("Calibration file \"%s\" does not fit %dx%d video: %s.",
@@ -743,7 +724,7 @@ gst_lftag_detect_update_detector (GstLFTagDetect * self, const Settings & s,
   if (st.detector && (st.built == s.detector || st.rejected == s.detector))
     return TRUE;
   try {
-    const Camera camera = frame_camera (s.detector, st.calibration,
+    const Camera camera = lftag::gst::frame_camera (pinhole (s.detector), st.calibration,
         GST_VIDEO_INFO_WIDTH (info), GST_VIDEO_INFO_HEIGHT (info));
     st.detector.emplace (detector_params (s.detector, camera));
     st.built = s.detector;

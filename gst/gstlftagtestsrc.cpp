@@ -48,6 +48,7 @@
 #include <lftag/render.hpp>
 #include <lftag/tag_id.hpp>
 
+#include "elementcamera.h"
 #include "lftagmeta.h"
 #include "markermotion.h"
 
@@ -230,20 +231,6 @@ resolve_ids (const Settings & s)
     ids.push_back (id);
   }
   return ids;
-}
-
-/* The camera for a frame: the calibration, else fx/fy/cx/cy, else the default. */
-Camera
-frame_camera (const Settings & s, const std::optional<Camera> & calibration, int width,
-    int height)
-{
-  if (calibration)
-    return calibration->for_frame (width, height);
-  if (s.fx > 0)
-    return Camera::pinhole (s.fx, s.fy > 0 ? s.fy : s.fx,
-        s.cx > 0 ? s.cx : (width - 1) / 2.0, s.cy > 0 ? s.cy : (height - 1) / 2.0,
-        width, height);
-  return Camera::default_for (width, height);
 }
 
 }  // namespace
@@ -598,21 +585,10 @@ gst_lftag_test_src_start (GstBaseSrc * bsrc)
   }
 
   st.calibration.reset ();
-  if (!s.calibration_file.empty ()) {
-    const gchar *path = s.calibration_file.c_str ();
-    if (!g_file_test (path, G_FILE_TEST_IS_REGULAR)) {
-      GST_ELEMENT_ERROR (self, RESOURCE, NOT_FOUND,
-          ("Calibration file \"%s\" does not exist.", path), (nullptr));
-      return FALSE;
-    }
-    try {
-      st.calibration = Camera::load (s.calibration_file);
-    } catch (const std::exception & e) {
-      GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS, ("Invalid %s.", e.what ()),
-          (nullptr));
-      return FALSE;
-    }
-  }
+  if (!s.calibration_file.empty ()
+      && !lftag::gst::load_calibration (GST_ELEMENT (self), s.calibration_file,
+          st.calibration))
+    return FALSE;
 
   st.photo.release ();
   if (s.background == GST_LFTAG_TEST_SRC_BACKGROUND_PHOTO) {
@@ -699,7 +675,8 @@ gst_lftag_test_src_set_caps (GstBaseSrc * bsrc, GstCaps * caps)
   /* One renderer per camera: it keeps the per-pixel rays and the background. */
   try {
     lftag::SceneParams params;
-    params.camera = frame_camera (s, st.calibration, width, height);
+    params.camera = lftag::gst::frame_camera ({s.fx, s.fy, s.cx, s.cy, {}}, st.calibration,
+        width, height);
     params.noise_sigma = s.noise;
     if (s.background == GST_LFTAG_TEST_SRC_BACKGROUND_GRADIENT) {
       params.exposure = 0.8;    /* keeps the bright side below white */
