@@ -15,6 +15,7 @@
 #include "lftagmeta.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
+#include "frames.hpp"
 
 namespace {
 
@@ -32,32 +33,6 @@ constexpr double kReliablePxPerUnit = 1.25;
 // largest errors seen were 1.3 degrees and 1.1 %).
 constexpr double kMaxRotationDeg = 3.0;
 constexpr double kMaxTranslationPercent = 2.0;
-
-// Buffers pulled from a pipeline, with their negotiated format.
-struct Frames {
-  std::vector<GstBuffer*> buffers;
-  GstVideoInfo info;
-  Frames() = default;
-  Frames(const Frames&) = delete;
-  ~Frames() {
-    for (GstBuffer* b : buffers) gst_buffer_unref(b);
-  }
-};
-
-void pull_frames(Frames& out, const std::string& launch, const char* caps, int n) {
-  GstHarness* h = gst_harness_new_parse(launch.c_str());
-  if (caps) gst_harness_set_sink_caps_str(h, caps);
-  gst_harness_play(h);
-  for (int i = 0; i < n; ++i) {
-    GstBuffer* buffer = gst_harness_pull(h);
-    fail_unless(buffer != nullptr, "frame %d of '%s' did not come", i, launch.c_str());
-    out.buffers.push_back(buffer);
-  }
-  GstCaps* negotiated = gst_pad_get_current_caps(h->sinkpad);
-  fail_unless(gst_video_info_from_caps(&out.info, negotiated));
-  gst_caps_unref(negotiated);
-  gst_harness_teardown(h);
-}
 
 // A harness around lftagdetect with `properties`, fed frames of `info`.
 GstHarness* detector(const std::string& properties, const GstVideoInfo& info) {
