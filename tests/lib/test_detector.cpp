@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // The whole detector on rendered scenes: every family over many poses, the paper's range
 // set-up, pose accuracy, several markers, photo backgrounds, rejections and odd frames.
+#include <functional>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -79,26 +80,37 @@ TEST(Detector, EveryFamilyDecodesOverManyPoses) {
   }
 }
 
+// Random ids of family n, one at a time in the paper's camera, at the pose `place` draws
+// (u: uniform in [-1, 1]), each scored against its truth.
+static Outcome paper_camera_trials(int n, int trials, std::uint64_t seed, int supersample,
+                                   const std::function<void(SceneMarker&, const std::function<double()>&)>& place) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uniform(-1, 1);
+  const std::function<double()> u = [&] { return uniform(rng); };
+  DetectorParams params;
+  params.families = {Family(n)};
+  Detector detector(params);
+  Outcome o;
+  for (int trial = 0; trial < trials; ++trial) {
+    SceneParams p;
+    p.camera = paper_camera();
+    p.supersample = supersample;
+    SceneMarker m;
+    m.family = Family(n);
+    m.id = random_id(m.family, rng);
+    place(m, u);
+    score(detector, render_scene(p, {m}), o);
+  }
+  return o;
+}
+
 TEST(Detector, PaperSetUp3x3At20Metres4x4At16Metres) {
   // 640x480, f = 320, 1 m markers: 16 px (3x3) and 20 px (4x4) across.
   for (const auto& [n, distance] : {std::pair{3, 20.0}, std::pair{4, 16.0}}) {
-    std::mt19937_64 rng(n);
-    std::uniform_real_distribution<double> u(-1, 1);
-    DetectorParams params;
-    params.families = {Family(n)};
-    Detector detector(params);
-    Outcome o;
-    for (int trial = 0; trial < 30; ++trial) {
-      SceneParams p;
-      p.camera = paper_camera();
-      p.supersample = 16;
-      SceneMarker m;
-      m.family = Family(n);
-      m.id = random_id(m.family, rng);
-      m.tvec = {0.05 * u(rng), 0.05 * u(rng), distance};  // sub-pixel offsets
-      m.rvec = rotation(180 * u(rng), 0, 0);
-      score(detector, render_scene(p, {m}), o);
-    }
+    const Outcome o = paper_camera_trials(n, 30, n, 16, [d = distance](SceneMarker& m, const auto& u) {
+      m.tvec = {0.05 * u(), 0.05 * u(), d};  // sub-pixel offsets
+      m.rvec = rotation(180 * u(), 0, 0);
+    });
     EXPECT_EQ(o.right, 30) << n << "x" << n << " at " << distance << " m";
     EXPECT_EQ(o.wrong, 0);
   }
@@ -109,22 +121,10 @@ TEST(Detector, SteepTiltCloseToTheCamera) {
   // up to 5 times the ink of its far ones (8 times counting the baseline's design), which
   // the area constraint must put down to perspective.
   for (int n : {3, 4}) {
-    std::mt19937_64 rng(20 + n);
-    std::uniform_real_distribution<double> u(-1, 1);
-    DetectorParams params;
-    params.families = {Family(n)};
-    Detector detector(params);
-    Outcome o;
-    for (int trial = 0; trial < 12; ++trial) {
-      SceneParams p;
-      p.camera = paper_camera();
-      SceneMarker m;
-      m.family = Family(n);
-      m.id = random_id(m.family, rng);
-      m.tvec = {0.01 * u(rng), 0.01 * u(rng), 2.0};
-      m.rvec = rotation(180 * u(rng), 75, 0);
-      score(detector, render_scene(p, {m}), o);
-    }
+    const Outcome o = paper_camera_trials(n, 12, 20 + n, 8, [](SceneMarker& m, const auto& u) {
+      m.tvec = {0.01 * u(), 0.01 * u(), 2.0};
+      m.rvec = rotation(180 * u(), 75, 0);
+    });
     EXPECT_EQ(o.right, 12) << n << "x" << n;
     EXPECT_EQ(o.wrong, 0);
   }
