@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "lftag/render.hpp"
+#include "binary.hpp"
 #include "stages.hpp"
 
 using namespace lftag;
@@ -49,13 +50,8 @@ struct Analysed {
 Analysed analyse(const cv::Mat1b& grey, const cv::Mat1b& black) {
   Analysed a;
   a.grey = grey;
-  BinaryImage& b = a.binary;
-  b.width = grey.cols, b.height = grey.rows, b.words_per_row = (grey.cols + 63) / 64;
-  b.bits.assign(std::size_t(b.words_per_row) * b.height, 0);
-  for (int y = 0; y < grey.rows; ++y)
-    for (int x = 0; x < grey.cols; ++x)
-      if (black(y, x)) b.bits[std::size_t(y) * b.words_per_row + (x >> 6)] |= std::uint64_t{1} << (x & 63);
-  RegionLabeller().label(b, a.tree);
+  a.binary = lftag::test::binary_from_mask(black);
+  RegionLabeller().label(a.binary, a.tree);
   a.map = cv::Mat1i(grey.size(), -1);
   for (int r = 0; r < int(a.tree.regions.size()); ++r)
     for (const RowRun& run : runs_of(a.tree, r))

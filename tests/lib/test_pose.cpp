@@ -11,6 +11,7 @@
 
 #include "lftag/render.hpp"
 #include "scenes.hpp"
+#include "binary.hpp"
 #include "stages.hpp"
 
 using namespace lftag;
@@ -61,12 +62,7 @@ std::optional<Posed> prepare(const Case& c) {
 
   const cv::Mat1b& image = scene.image;
   const int level = int(255 * (p.marker.white + p.marker.black) / 2);
-  detail::BinaryImage binary;
-  binary.width = image.cols, binary.height = image.rows, binary.words_per_row = (image.cols + 63) / 64;
-  binary.bits.assign(std::size_t(binary.words_per_row) * image.rows, 0);
-  for (int y = 0; y < image.rows; ++y)
-    for (int x = 0; x < image.cols; ++x)
-      if (image(y, x) < level) binary.bits[std::size_t(y) * binary.words_per_row + (x >> 6)] |= std::uint64_t{1} << (x & 63);
+  const detail::BinaryImage binary = test::binary_from_mask(image < level);
   detail::RegionTree tree;
   detail::RegionLabeller().label(binary, tree);
   DetectorParams params;

@@ -16,6 +16,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "binary.hpp"
 #include "stages.hpp"
 
 using namespace lftag;
@@ -38,16 +39,7 @@ std::vector<RowRun> runs_of(const RegionTree& t, int r) {
   return out;
 }
 
-// Binary images are built bit by bit here, independently of the threshold stage.
-BinaryImage from_mat(const cv::Mat1b& black) {
-  BinaryImage b;
-  b.width = black.cols, b.height = black.rows, b.words_per_row = (black.cols + 63) / 64;
-  b.bits.assign(std::size_t(b.words_per_row) * b.height, 0);
-  for (int y = 0; y < black.rows; ++y)
-    for (int x = 0; x < black.cols; ++x)
-      if (black(y, x)) b.bits[std::size_t(y) * b.words_per_row + (x >> 6)] |= std::uint64_t{1} << (x & 63);
-  return b;
-}
+BinaryImage from_mat(const cv::Mat1b& black) { return lftag::test::binary_from_mask(black); }
 
 // '#' black, anything else white.
 cv::Mat1b from_rows(const std::vector<std::string>& rows) {
