@@ -53,10 +53,12 @@ std::vector<std::pair<std::string, double>> LftagSystem::counters() const {
           {"geometry", double(s.geometry)},     {"angle", double(s.angle)},
           {"collinearity", double(s.collinearity)}, {"residual", double(s.residual)},
           {"unambiguous", double(s.unambiguous)},   {"decoded", double(s.decoded)},
+          {"second_looks", double(s.second_looks)}, {"second_look_found", double(s.second_look_found)},
           {"threshold_ms", s.threshold_ms},     {"regions_ms", s.regions_ms},
           {"candidates_ms", s.candidates_ms},   {"keypoints_ms", s.keypoints_ms},
           {"hypotheses_ms", s.hypotheses_ms},   {"decode_ms", s.decode_ms},
-          {"pose_ms", s.pose_ms},               {"total_ms", s.total_ms()}};
+          {"pose_ms", s.pose_ms},               {"second_look_ms", s.second_look_ms},
+          {"total_ms", s.total_ms()}};
 }
 
 }  // namespace bench

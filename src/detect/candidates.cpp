@@ -139,8 +139,9 @@ Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, co
 
 void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
                      const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
-                     DetectionStats& stats) {
+                     DetectionStats& stats, const PatchFrame& patch) {
   out.clear();
+  const double pixel_area = 1.0 / (patch.scale * patch.scale);  // of a patch pixel, in frame pixels
   stats.regions += std::int64_t(tree.regions.size());
   int smallest = 1 << 30, largest = 0;
   for (const Family& f : params.families) {
@@ -173,10 +174,14 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
       Candidate c;
       c.family = f;
       c.white_region = r;
-      c.white_area = white.area;
+      c.white_area = white.area * pixel_area;
       c.white_level = params.centroid_reference == CentroidReference::local_white ? white_level(tree, r, image) : 255.0;
-      for (int i = 0; i < n2; ++i)
-        c.blobs.push_back(measure_blob(tree, kids[i], image, binary, params.dilation, c.white_level));
+      for (int i = 0; i < n2; ++i) {
+        Blob b = measure_blob(tree, kids[i], image, binary, params.dilation * patch.scale, c.white_level);
+        b.centroid = patch.to_frame(b.centroid);
+        b.mass *= pixel_area;
+        c.blobs.push_back(b);
+      }
       // Area constraint on the blobs' ink (the zeroth moments, robust at a few pixels),
       // perspective taken out.
       if (!(ink_spread(c.blobs) <= params.max_area_ratio)) continue;

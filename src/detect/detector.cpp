@@ -48,6 +48,7 @@ void DetectorParams::validate() const {
   if (upsample != 1 && upsample != 2) fail("upsample must be 1 or 2");
   if (!(noise_fraction >= 0 && noise_fraction < 1)) fail("noise fraction must be in [0, 1)");
   if (!(noise_ratio >= 1)) fail("the noise ratio must be at least 1");
+  if (max_second_looks < 0) fail("the number of second looks must not be negative");
   if (max_extra_children < 0 || max_extra_children > 64) fail("extra children must be 0 to 64");
   if (dilation < 0 || dilation > 8) fail("dilation must be 0 to 8 pixels");
   if (!(max_area_ratio >= 1)) fail("the area ratio (tau1) must be at least 1");
@@ -62,17 +63,87 @@ void DetectorParams::validate() const {
 }
 
 double DetectionStats::total_ms() const {
-  return threshold_ms + regions_ms + candidates_ms + keypoints_ms + hypotheses_ms + decode_ms + pose_ms;
+  return threshold_ms + regions_ms + candidates_ms + keypoints_ms + hypotheses_ms + decode_ms + pose_ms +
+         second_look_ms;
 }
 
 DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   frames += o.frames, regions += o.regions, topology += o.topology, area += o.area, geometry += o.geometry;
   angle += o.angle, collinearity += o.collinearity, residual += o.residual, unambiguous += o.unambiguous;
-  decoded += o.decoded;
+  decoded += o.decoded, second_looks += o.second_looks, second_look_found += o.second_look_found;
+  second_look_ms += o.second_look_ms;
   threshold_ms += o.threshold_ms, regions_ms += o.regions_ms, candidates_ms += o.candidates_ms;
   keypoints_ms += o.keypoints_ms, hypotheses_ms += o.hypotheses_ms, decode_ms += o.decode_ms, pose_ms += o.pose_ms;
   return *this;
 }
+
+namespace {
+
+// Key points, decoding and pose of every candidate; detections are appended to `found`.
+void decode_candidates(const std::vector<detail::Candidate>& candidates, const ImageView& work, const Camera& camera,
+                       const DetectorParams& p, DetectionStats& stats, DetectionTrace* trace,
+                       std::vector<Detection>& found) {
+  for (const detail::Candidate& c : candidates) {
+    if (trace) {
+      std::vector<cv::Point2d> centroids;
+      for (const detail::Blob& b : c.blobs) centroids.push_back(b.centroid);
+      trace->candidates.push_back(centroids);
+    }
+    auto start = Clock::now();
+    std::vector<detail::KeyPoints> sides = detail::find_keypoints(c, p, stats);
+    // The side whose K0 and K1 carry the most ink (perspective taken out) is most likely
+    // the baseline: decoding it first usually spares the other three.
+    const auto baseline_ink = [&](const detail::KeyPoints& k) {
+      return c.blobs[k.blob[0]].relative_ink + c.blobs[k.blob[1]].relative_ink;
+    };
+    std::stable_sort(sides.begin(), sides.end(), [&](const detail::KeyPoints& a, const detail::KeyPoints& b) {
+      return baseline_ink(a) > baseline_ink(b);
+    });
+    stats.keypoints_ms += elapsed_ms(start);
+    // The first decoding of a hull side whose squares' ink matches the design: a wrong side
+    // puts squares of the wrong size in the baseline's and data cells' places (spread 2 to
+    // 3), so no two sides pass.
+    std::optional<detail::KeyPoints> k;
+    std::optional<detail::Decoding> d;
+    std::array<bool, 2> passed{};  // residual, margin: for any side
+    for (const detail::KeyPoints& side : sides) {
+      if (trace) {
+        std::array<cv::Point2d, 4> points;
+        for (int i = 0; i < 4; ++i) points[i] = c.blobs[side.blob[i]].centroid;
+        trace->keypoints.push_back(points);
+        trace->hypotheses.emplace_back();
+      }
+      auto decoded = detail::decode(c, side, work, camera, p, stats, trace ? &trace->hypotheses.back() : nullptr);
+      if (!decoded) continue;
+      passed[0] |= decoded->verdict != detail::Verdict::residual;
+      passed[1] |= decoded->verdict == detail::Verdict::accepted;
+      if (decoded->verdict == detail::Verdict::accepted && decoded->ink_spread <= p.max_ink_spread) {
+        d = decoded;
+        k = side;
+        break;
+      }
+    }
+    stats.residual += passed[0], stats.unambiguous += passed[1];
+    if (!d) continue;
+    ++stats.decoded;
+
+    start = Clock::now();
+    Detection det;
+    det.family = c.family;
+    det.id = d->id;
+    det.decode_error = d->error;
+    det.worst_cell = d->worst_cell;
+    det.ink_spread = d->ink_spread;
+    det.edge_score = d->edge_score;
+    for (int g = 0; g < c.family.cell_count(); ++g) det.centroids.push_back(c.blobs[d->blob_of_cell[g]].centroid);
+    for (int i = 0; i < 4; ++i) det.keypoints[i] = c.blobs[k->blob[i]].centroid;
+    const bool posed = detail::estimate_pose(c, *d, camera, p, det);
+    stats.pose_ms += elapsed_ms(start);
+    if (posed) found.push_back(std::move(det));
+  }
+}
+
+}  // namespace
 
 struct Detector::Impl {
   DetectorParams params;
@@ -82,6 +153,10 @@ struct Detector::Impl {
   detail::RegionLabeller labeller;
   detail::RegionTree tree;
   std::vector<detail::Candidate> candidates;
+  // The second look's patch and its binary image and tree.
+  detail::Patch patch;
+  detail::BinaryImage patch_binary;
+  detail::RegionTree patch_tree;
   Camera camera;  // for the last frame size
   cv::Size camera_size;
 
@@ -139,64 +214,45 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   detail::find_candidates(s.tree, s.binary, work, p, camera, s.candidates, stats);
   stats.candidates_ms = elapsed_ms(start);
 
-  for (const detail::Candidate& c : s.candidates) {
-    if (trace) {
-      std::vector<cv::Point2d> centroids;
-      for (const detail::Blob& b : c.blobs) centroids.push_back(b.centroid);
-      trace->candidates.push_back(centroids);
-    }
-    start = Clock::now();
-    std::vector<detail::KeyPoints> sides = detail::find_keypoints(c, p, stats);
-    // The side whose K0 and K1 carry the most ink (perspective taken out) is most likely
-    // the baseline: decoding it first usually spares the other three.
-    const auto baseline_ink = [&](const detail::KeyPoints& k) {
-      return c.blobs[k.blob[0]].relative_ink + c.blobs[k.blob[1]].relative_ink;
-    };
-    std::stable_sort(sides.begin(), sides.end(), [&](const detail::KeyPoints& a, const detail::KeyPoints& b) {
-      return baseline_ink(a) > baseline_ink(b);
-    });
-    stats.keypoints_ms += elapsed_ms(start);
-    // The first decoding of a hull side whose squares' ink matches the design: a wrong side
-    // puts squares of the wrong size in the baseline's and data cells' places (spread 2 to
-    // 3), so no two sides pass.
-    std::optional<detail::KeyPoints> k;
-    std::optional<detail::Decoding> d;
-    std::array<bool, 2> passed{};  // residual, margin: for any side
-    for (const detail::KeyPoints& side : sides) {
-      if (trace) {
-        std::array<cv::Point2d, 4> points;
-        for (int i = 0; i < 4; ++i) points[i] = c.blobs[side.blob[i]].centroid;
-        trace->keypoints.push_back(points);
-        trace->hypotheses.emplace_back();
-      }
-      auto decoded = detail::decode(c, side, work, camera, p, stats, trace ? &trace->hypotheses.back() : nullptr);
-      if (!decoded) continue;
-      passed[0] |= decoded->verdict != detail::Verdict::residual;
-      passed[1] |= decoded->verdict == detail::Verdict::accepted;
-      if (decoded->verdict == detail::Verdict::accepted && decoded->ink_spread <= p.max_ink_spread) {
-        d = decoded;
-        k = side;
-        break;
-      }
-    }
-    stats.residual += passed[0], stats.unambiguous += passed[1];
-    if (!d) continue;
-    ++stats.decoded;
+  decode_candidates(s.candidates, work, camera, p, stats, trace, found);
 
+  // The second look, around clusters that no detection covers.
+  if (p.second_look && up == 1) {
     start = Clock::now();
-    Detection det;
-    det.family = c.family;
-    det.id = d->id;
-    det.decode_error = d->error;
-    det.worst_cell = d->worst_cell;
-    det.ink_spread = d->ink_spread;
-    det.edge_score = d->edge_score;
-    for (int g = 0; g < c.family.cell_count(); ++g) det.centroids.push_back(c.blobs[d->blob_of_cell[g]].centroid);
-    for (int i = 0; i < 4; ++i) det.keypoints[i] = c.blobs[k->blob[i]].centroid;
-    const bool posed = detail::estimate_pose(c, *d, camera, p, det);
-    stats.pose_ms += elapsed_ms(start);
-    if (posed) found.push_back(std::move(det));
+    const detail::SecondLook look;
+    std::vector<cv::Rect> taken;
+    for (const Detection& d : found)
+      taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
+    std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, look, taken);
+    if (int(boxes.size()) > p.max_second_looks) boxes.resize(p.max_second_looks);
+    stats.second_look_ms += elapsed_ms(start);
+    for (const cv::Rect& box : boxes) {
+      start = Clock::now();
+      ++stats.second_looks;
+      if (!detail::enlarge_patch(work, box, look, s.patch)) {
+        stats.second_look_ms += elapsed_ms(start);
+        continue;
+      }
+      detail::binarise_patch(s.patch, 0.5, s.patch_binary);
+      s.labeller.label(s.patch_binary, s.patch_tree);
+      detail::find_candidates(s.patch_tree, s.patch_binary, ImageView(s.patch.grey), p, camera, s.candidates, stats,
+                              s.patch.frame);
+      stats.second_look_ms += elapsed_ms(start);
+      std::vector<Detection> more;
+      decode_candidates(s.candidates, work, camera, p, stats, trace, more);
+      // Neighbouring patches can overlap one marker: the first reading of a place stands.
+      for (Detection& d : more) {
+        const bool seen = std::any_of(found.begin(), found.end(), [&](const Detection& f) {
+          const std::vector<cv::Point2f> outline(f.corners.begin(), f.corners.end());
+          return cv::pointPolygonTest(outline, cv::Point2f(d.center), false) >= 0;
+        });
+        if (seen) continue;
+        ++stats.second_look_found;
+        found.push_back(std::move(d));
+      }
+    }
   }
+
   if (up > 1) {
     const auto back = [up](cv::Point2d& q) { q = (q + cv::Point2d(0.5, 0.5)) / up - cv::Point2d(0.5, 0.5); };
     for (Detection& d : found) {

@@ -30,6 +30,9 @@ struct BinaryImage {
 // `offset`. `mean` is scratch space kept between frames.
 void threshold_mean(const ImageView& image, int window, int offset, cv::Mat& mean, BinaryImage& out);
 
+// Black where a pixel is darker than `level`.
+void threshold_level(const ImageView& image, int level, BinaryImage& out);
+
 // ---------------------------------------------------------------- regions.cpp
 struct Region {
   bool black = false;
@@ -94,6 +97,16 @@ class RegionLabeller {
 };
 
 // ---------------------------------------------------------------- candidates.cpp
+// Where the pixels handed to find_candidates lie in the frame: a patch enlarged `scale`
+// times whose pixel (0, 0) covers frame pixel `origin` (the whole frame by default).
+struct PatchFrame {
+  cv::Point origin{0, 0};
+  int scale = 1;
+  cv::Point2d to_frame(cv::Point2d p) const {
+    return {(p.x + 0.5) / scale - 0.5 + origin.x, (p.y + 0.5) / scale - 0.5 + origin.y};
+  }
+};
+
 struct Blob {
   int region = -1;
   int area = 0;          // pixels
@@ -112,15 +125,43 @@ struct Candidate {
 };
 
 // Topological filtering, vertex estimation and the area constraint. Counts into stats.
+// `image` and `binary` may be a patch of the frame (see PatchFrame): the candidates'
+// centroids, areas and inks are then given in the frame's pixels.
 void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
                      const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
-                     DetectionStats& stats);
+                     DetectionStats& stats, const PatchFrame& patch = {});
 
 // Centroid of the inverted grey image over `region` with its holes and the white pixels
 // within `reach` pixels of it that are nearer to it than to any other black pixel. `white` is the grey
 // level that weighs zero (255 for the paper's plain inversion).
 Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary, int reach,
                   double white);
+
+// ---------------------------------------------------------------- second_look.cpp
+struct SecondLook {
+  int min_size = 6;   // frame pixels, the cluster's longer side
+  int max_size = 192;
+  int enlarge_below = 64;  // clusters smaller than this are enlarged twice
+};
+
+// Boxes of small isolated clusters of black regions, part ink and part paper, that touch
+// none of the `taken` boxes: where a marker may be that the binary image did not resolve.
+// The most isolated (the whitest ring around the box) come first.
+std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const SecondLook& look,
+                                      const std::vector<cv::Rect>& taken);
+
+// A neighbourhood of the frame, enlarged, with its local darkest and brightest levels.
+struct Patch {
+  cv::Mat grey, dark, bright;
+  PatchFrame frame;
+};
+
+// The neighbourhood of `box` enlarged as `look` says; false when it is empty.
+bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look, Patch& patch);
+
+// Black where a pixel lies below `level` (0..1) of the way from its local darkest to its
+// local brightest level, where those differ by a printed contrast; white elsewhere.
+void binarise_patch(const Patch& patch, double level, BinaryImage& out);
 
 // ---------------------------------------------------------------- keypoints.cpp
 // Blob indices of K0..K3 after the geometry, angle and collinearity constraints.

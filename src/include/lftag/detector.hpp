@@ -62,6 +62,13 @@ struct DetectorParams {
   // times the cost. Results are in the frame's own pixels either way.
   int upsample = 1;
 
+  // -- Second look: small, isolated clusters of black regions where no marker was found
+  //    (markers at about half a pixel per unit, whose gaps the frame's binary image closes)
+  //    are enlarged twice and binarised at the midpoint of their own dark and bright
+  //    levels, then go through the same stages; everything is measured in the frame.
+  bool second_look = true;
+  int max_second_looks = 64;  // patches per frame at most, the work bound of a cluttered frame
+
   // -- Candidates: a white region with at least n^2 black children. Children smaller than
   //    `noise_fraction` of the white region's area, or than the largest child over
   //    `noise_ratio`, are noise; at most n^2 + max_extra_children children remain, of
@@ -148,6 +155,8 @@ struct DetectionStats {
   std::int64_t residual = 0;           // decoded within tau3 and the cell residual bound
   std::int64_t unambiguous = 0;        // no other id fitting within the decoding margin
   std::int64_t decoded = 0;            // the squares' ink matches the design: detections
+  std::int64_t second_looks = 0;       // patches examined again (see DetectorParams::second_look)
+  std::int64_t second_look_found = 0;  // detections made in them
   double threshold_ms = 0;             // binarisation
   double regions_ms = 0;               // topological connected components
   double candidates_ms = 0;            // topological filtering and vertex estimation
@@ -155,6 +164,7 @@ struct DetectionStats {
   double hypotheses_ms = 0;            // 16 initial poses and their evaluation
   double decode_ms = 0;                // decoding
   double pose_ms = 0;                  // final pose
+  double second_look_ms = 0;           // finding, enlarging, binarising and labelling the patches
   double total_ms() const;
   DetectionStats& operator+=(const DetectionStats& other);
 };

@@ -1,0 +1,156 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// The second look: markers the frame's binary image could not resolve, re-examined in
+// their neighbourhood at a higher resolution and with a threshold of their own.
+//
+// At about half a pixel per unit, the two-unit gaps of a marker are one pixel wide: one
+// binarisation at the frame's resolution cannot keep a diagonal black border 4-connected
+// and the diagonal white gaps beside it 8-connected, and a 16-pixel mean next to a white
+// margin sinks the gaps into the squares. So the squares join the border and the white
+// region loses its n^2 children, although the grey levels still hold the marker. Such a
+// marker leaves a small, isolated cluster of black regions in the binary image: those
+// clusters are enlarged, binarised at the midpoint of their own dark and bright levels
+// and handed to the usual stages, with every measurement taken back to the frame.
+#include <algorithm>
+#include <numeric>
+
+#include <opencv2/imgproc.hpp>
+
+#include "stages.hpp"
+
+namespace lftag::detail {
+namespace {
+
+struct Cluster {
+  int x0, y0, x1, y1;  // inclusive box
+  int ink = 0;         // black pixels of its regions
+  int pieces = 0;      // its black regions and their holes
+};
+
+int find_root(std::vector<int>& parent, int i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
+
+// Black pixels on the one-pixel ring just outside box b (clipped to the frame) over
+// the ring's length.
+double ring_ink(const BinaryImage& binary, const Cluster& b) {
+  int black = 0, count = 0;
+  auto visit = [&](int x, int y) {
+    if (x < 0 || y < 0 || x >= binary.width || y >= binary.height) return;
+    ++count;
+    black += binary.black(x, y);
+  };
+  for (int x = b.x0 - 1; x <= b.x1 + 1; ++x) visit(x, b.y0 - 1), visit(x, b.y1 + 1);
+  for (int y = b.y0; y <= b.y1; ++y) visit(b.x0 - 1, y), visit(b.x1 + 1, y);
+  return count ? double(black) / count : 1.0;
+}
+
+}  // namespace
+
+std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const SecondLook& look,
+                                      const std::vector<cv::Rect>& taken) {
+  // Small black regions, clustered when their boxes touch or overlap (a far marker's
+  // border breaks into pieces on the diagonals). Each starts as a cluster of its own. The
+  // tree numbers regions in the raster order of their first pixels, so their tops never
+  // decrease and a region meets only those that start before its bottom.
+  std::vector<Cluster> small;
+  for (int r = 1; r < int(tree.regions.size()); ++r) {
+    const Region& g = tree.regions[r];
+    if (!g.black || g.area < 2) continue;
+    if (g.x1 - g.x0 + 1 > look.max_size || g.y1 - g.y0 + 1 > look.max_size) continue;
+    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count});
+  }
+  std::vector<int> parent(small.size());
+  std::iota(parent.begin(), parent.end(), 0);
+  for (std::size_t i = 0; i < small.size(); ++i) {
+    const Cluster& a = small[i];
+    for (std::size_t j = i + 1; j < small.size() && small[j].y0 <= a.y1 + 1; ++j) {
+      const Cluster& b = small[j];
+      if (b.x0 > a.x1 + 1 || a.x0 > b.x1 + 1) continue;
+      parent[find_root(parent, int(j))] = find_root(parent, int(i));
+    }
+  }
+  std::vector<Cluster> clusters(small.size(), Cluster{1 << 30, 1 << 30, -1, -1, 0, 0});
+  for (std::size_t i = 0; i < small.size(); ++i) {
+    const Cluster& g = small[i];
+    Cluster& c = clusters[find_root(parent, int(i))];
+    c.x0 = std::min(c.x0, g.x0), c.y0 = std::min(c.y0, g.y0);
+    c.x1 = std::max(c.x1, g.x1), c.y1 = std::max(c.y1, g.y1);
+    c.ink += g.ink;
+    c.pieces += g.pieces;
+  }
+
+  std::vector<std::pair<double, cv::Rect>> found;  // ring ink, box
+  for (std::size_t i = 0; i < small.size(); ++i) {
+    if (find_root(parent, int(i)) != int(i)) continue;
+    const Cluster& c = clusters[i];
+    const int w = c.x1 - c.x0 + 1, h = c.y1 - c.y0 + 1;
+    // A marker's size, a square seen at up to about 70 degrees, about half ink (0.42 to
+    // 0.68 measured from 13 px to blurred 70 px markers), broken into pieces or holed by
+    // its gaps (at least 5 measured; one piece or a ring is a blob or a letter), and alone
+    // on its white margin. Of the clusters in photos, about 2 in 1,000 pass.
+    if (std::max(w, h) < look.min_size || std::max(w, h) > look.max_size) continue;
+    if (std::max(w, h) > 3 * std::min(w, h)) continue;
+    const double fill = double(c.ink) / (w * h);
+    if (fill < 0.35 || fill > 0.8 || c.pieces < 4) continue;
+    const double ring = ring_ink(binary, c);
+    if (ring > 0.25) continue;
+    const cv::Rect box(c.x0, c.y0, w, h);
+    if (std::any_of(taken.begin(), taken.end(), [&](const cv::Rect& t) { return (t & box).area() > 0; })) continue;
+    found.emplace_back(ring, box);
+  }
+  // The most isolated first: a printed marker sits on its white margin.
+  std::stable_sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<cv::Rect> out;
+  for (const auto& f : found) out.push_back(f.second);
+  return out;
+}
+
+bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look, Patch& patch) {
+  // Paper all round the cluster, so that the patch's bright level is the margin's.
+  const int side = std::max(box.width, box.height);
+  const int grow = std::max(2, side / 4);
+  const cv::Rect area = cv::Rect(box.x - grow, box.y - grow, box.width + 2 * grow, box.height + 2 * grow) &
+                        cv::Rect(0, 0, image.width, image.height);
+  if (area.empty()) return false;
+  const cv::Mat native = image.mat()(area);
+  // Small clusters are enlarged, so that one-pixel gaps become two pixels wide, and
+  // sharpened (unsharp mask of half a frame pixel), which the interpolation softened.
+  const int scale = side < look.enlarge_below ? 2 : 1;
+  patch.frame.origin = area.tl();
+  patch.frame.scale = scale;
+  if (scale > 1) {
+    cv::Mat enlarged, blurred;
+    cv::resize(native, enlarged, cv::Size(), scale, scale, cv::INTER_CUBIC);
+    cv::GaussianBlur(enlarged, blurred, cv::Size(0, 0), 0.5 * scale);
+    cv::addWeighted(enlarged, 2.0, blurred, -1.0, 0, patch.grey);
+  } else {
+    native.copyTo(patch.grey);
+  }
+  // The darkest and brightest levels within about a third of the cluster (a marker cell
+  // or more): every square then sees the paper of the gaps beside it.
+  const int window = std::max(9, side * scale / 3) | 1;
+  const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(window, window));
+  cv::erode(patch.grey, patch.dark, kernel);
+  cv::dilate(patch.grey, patch.bright, kernel);
+  return true;
+}
+
+void binarise_patch(const Patch& patch, double level, BinaryImage& binary) {
+  const cv::Mat& grey = patch.grey;
+  binary.width = grey.cols, binary.height = grey.rows, binary.words_per_row = (grey.cols + 63) / 64;
+  binary.bits.assign(std::size_t(binary.words_per_row) * grey.rows, 0);
+  const int fixed = int(std::lround(level * 256));
+  for (int y = 0; y < grey.rows; ++y) {
+    const std::uint8_t* g = grey.ptr<std::uint8_t>(y);
+    const std::uint8_t* l = patch.dark.ptr<std::uint8_t>(y);
+    const std::uint8_t* h = patch.bright.ptr<std::uint8_t>(y);
+    std::uint64_t* bits = binary.bits.data() + std::size_t(y) * binary.words_per_row;
+    for (int x = 0; x < grey.cols; ++x) {
+      const int range = h[x] - l[x];
+      if (range >= 24 && (g[x] - l[x]) * 256 < fixed * range) bits[x >> 6] |= std::uint64_t{1} << (x & 63);
+    }
+  }
+}
+
+}  // namespace lftag::detail
