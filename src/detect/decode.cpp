@@ -210,9 +210,23 @@ bool assign_cells(const Candidate& c, const KeyPoints& k, const cv::Matx33d& h, 
         if (e.dot(e) < nearest) nearest = e.dot(e), blob = j;
       }
     }
-    if (used[blob]) return false;
+    if (blob < 0 || used[blob]) return false;  // no finite projection, or a blob claimed twice
     used[blob] = 1;
     d.blob_of_cell[g] = blob;
+  }
+  return true;
+}
+
+// True when h maps the whole marker to finite points in front of the camera: the
+// homogeneous scale keeps one sign over the marker's corners (a plane seen from the
+// front), so no projection wraps through infinity.
+bool maps_marker(const Family& f, const cv::Matx33d& h) {
+  double first = 0;
+  for (const cv::Point2d& u : f.outer_corners()) {
+    const cv::Vec3d q = h * cv::Vec3d(u.x, u.y, 1.0);
+    if (!std::isfinite(q[0]) || !std::isfinite(q[1]) || !std::isfinite(q[2]) || q[2] == 0) return false;
+    if (first == 0) first = q[2];
+    else if ((q[2] > 0) != (first > 0)) return false;
   }
   return true;
 }
@@ -277,7 +291,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
 
     Decoding d;
     d.homography = cv::Matx33d(hm);
-    if (!assign_cells(c, k, d.homography, d)) {
+    if (!maps_marker(f, d.homography) || !assign_cells(c, k, d.homography, d)) {
       stats.decode_ms += elapsed_ms(start);
       continue;
     }
@@ -285,7 +299,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     // The four key points fix this homography; all n^2 blobs judge it. The marker's id
     // explains every centroid with one homography, a wrong hypothesis cannot.
     if (f.n() > 2)
-      if (const auto h = refit(c, d)) d.homography = *h;
+      if (const auto h = refit(c, d); h && maps_marker(f, *h)) d.homography = *h;
     const double residual = read_digits(c, d);
     stats.decode_ms += elapsed_ms(start);
 

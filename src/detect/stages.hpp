@@ -169,6 +169,10 @@ struct KeyPoints {
   std::array<int, 4> blob{};
 };
 
+// Blob indices of the four vertices of the centroids' convex hull that span the largest
+// quadrilateral, clockwise on screen; empty when the centroids do not span one.
+std::vector<int> hull_corners(const Candidate& c);
+
 // K0..K3 for each side of the centroids' hull that passes the constraints (in the order of
 // the paper's funnel, counted into stats when any side passes).
 std::vector<KeyPoints> find_keypoints(const Candidate& c, const DetectorParams& params, DetectionStats& stats);

@@ -364,6 +364,30 @@ TEST(Decode, ErrorMetricAndHomography) {
   EXPECT_TRUE(run(*p, p->keypoints, strict));
 }
 
+TEST(Decode, NonFiniteOrWrappedProjectionsAreNoReading) {
+  // Key points that put part of the marker behind the camera (the homography's scale
+  // changes sign over the marker), or that are not finite, give no hypothesis to read:
+  // no blob index of -1 and no integer conversion of NaN on the way.
+  const Family f(3);
+  const auto p = prepare_raster(f, 1234, 4.0);
+  ASSERT_TRUE(p.has_value());
+  for (const cv::Point2d bad : {cv::Point2d(NAN, 3), cv::Point2d(HUGE_VAL, 0)}) {
+    Prepared q = *p;
+    for (detail::Blob& b : q.candidate.blobs) b.point = bad;
+    DetectionStats stats;
+    const auto d = detail::decode(q.candidate, q.keypoints, ImageView(q.image), q.camera, DetectorParams{}, stats, nullptr);
+    EXPECT_FALSE(d && d->verdict == detail::Verdict::accepted);
+  }
+  // K2 and K3 swapped with K0 and K1 across a line through the marker: a bow-tie.
+  Prepared q = *p;
+  std::swap(q.candidate.blobs[q.keypoints.blob[2]].point, q.candidate.blobs[q.keypoints.blob[3]].point);
+  q.candidate.blobs[q.keypoints.blob[2]].point.y = 2 * q.candidate.blobs[q.keypoints.blob[0]].point.y -
+                                                   q.candidate.blobs[q.keypoints.blob[2]].point.y;
+  DetectionStats stats;
+  const auto d = detail::decode(q.candidate, q.keypoints, ImageView(q.image), q.camera, DetectorParams{}, stats, nullptr);
+  EXPECT_FALSE(d && d->verdict == detail::Verdict::accepted);
+}
+
 TEST(Decode, FitHomographyIsExactOnExactPoints) {
   const cv::Matx33d truth(3.1, 0.4, 120, -0.3, 2.7, 80, 0.002, -0.001, 1);
   for (int count : {4, 9, 25}) {

@@ -324,3 +324,34 @@ TEST(FindKeypoints, AMirroredMarkerDoesNotGiveTheTruth) {
   EXPECT_EQ(out.count(truth), 0u);
   EXPECT_EQ(out.size(), 4u);
 }
+
+TEST(FindKeypoints, TheLargestHullQuadrilateralOfARingOfDots) {
+  // 67 blobs on a slightly irregular ring: an 8x8 candidate with three extra children,
+  // the case where trying every 4-subset of the hull took 635,000 quadrilaterals. The
+  // corners found must span the largest quadrilateral, as a brute force finds it.
+  std::vector<cv::Point2d> points;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> wobble(-0.3, 0.3);
+  for (int i = 0; i < 67; ++i) {
+    const double t = 2 * CV_PI * i / 67;
+    points.emplace_back(200 + (100 + wobble(rng)) * std::cos(t), 150 + (60 + wobble(rng)) * std::sin(t));
+  }
+  const Candidate c = from_points(Family(8), points);
+  auto area = [&](const Quad& q) {
+    double a = 0;
+    for (int i = 0; i < 4; ++i) a += points[q[i]].cross(points[q[(i + 1) % 4]]);
+    return std::abs(a) / 2;
+  };
+  double best = 0;
+  for (int a = 0; a < 67; ++a)
+    for (int b = a + 1; b < 67; ++b)
+      for (int d = b + 1; d < 67; ++d)
+        for (int e = d + 1; e < 67; ++e) best = std::max(best, area({a, b, d, e}));
+  const std::vector<int> corners = detail::hull_corners(c);
+  ASSERT_EQ(corners.size(), 4u);
+  EXPECT_NEAR(area({corners[0], corners[1], corners[2], corners[3]}), best, 1e-9 * best);
+  // Clockwise on screen (y down): a positive shoelace sum.
+  double signed_area = 0;
+  for (int i = 0; i < 4; ++i) signed_area += points[corners[i]].cross(points[corners[(i + 1) % 4]]);
+  EXPECT_GT(signed_area, 0);
+}
