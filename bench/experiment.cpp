@@ -19,6 +19,7 @@ const std::vector<Experiment>& experiments() {
       {"blur", "largest linear motion blur with every marker found, per blur angle", run_blur},
       {"pose", "rotation and translation error against distance and tilt", run_pose},
       {"fp", "false positives on marker-free real images (opencv-doc)", run_false_positives},
+      {"video", "recall and pose error of moving markers composited into real video (1280x720, JPEG)", run_video},
       {"speed", "median time per 1280x720 and 1920x1080 frame, one thread", run_speed},
   };
   return all;

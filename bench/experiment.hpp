@@ -36,6 +36,7 @@ bool run_angle(const Options& options);
 bool run_blur(const Options& options);
 bool run_pose(const Options& options);
 bool run_false_positives(const Options& options);
+bool run_video(const Options& options);
 bool run_speed(const Options& options);
 
 // A generator seeded from the run seed and a path of indices, so that every system sees

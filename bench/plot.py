@@ -187,6 +187,31 @@ def plot_speed(results):
     return save(fig, results / "speed.png")
 
 
+def plot_video(results):
+    summary = read(results, "video_summary.csv")
+    if not summary:
+        return None
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True)
+    groups = by_system(summary)
+    colour = colours(groups)
+    for ax, kind, label in ((axes[0], "edge_px", "projected tag edge (px)"), (axes[1], "tilt_deg", "tilt (degrees)")):
+        bins = list(dict.fromkeys(r["bin"] for r in summary if r["bin_kind"] == kind))
+        for name, rs in groups.items():
+            recall = {r["bin"]: number(r["recall_pct"]) for r in rs if r["bin_kind"] == kind}
+            ax.plot(range(len(bins)), [recall.get(b, math.nan) for b in bins], "-o", ms=4, color=colour[name],
+                    label=name)
+        ax.set_xticks(range(len(bins)))
+        ax.set_xticklabels(bins)
+        ax.set_xlabel(label)
+        ax.grid(True, alpha=0.3)
+    lowest = min((number(r["recall_pct"]) for r in summary if r["recall_pct"]), default=0)
+    axes[0].set_ylim(max(0, lowest - 5), 101)
+    axes[0].set_ylabel("markers found (%)")
+    axes[1].legend(fontsize=7)
+    fig.suptitle("Markers composited into real video (1280x720, shake, defocus, light, noise, JPEG 60)")
+    return save(fig, results / "video_recall.png")
+
+
 def save(fig, path):
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -202,7 +227,7 @@ def main(argv):
     if not results.is_dir():
         print(f"plot.py: no results directory {results}", file=sys.stderr)
         return 1
-    for plot in (plot_range, plot_range_rate, plot_blur, plot_pose, plot_speed):
+    for plot in (plot_range, plot_range_rate, plot_blur, plot_pose, plot_speed, plot_video):
         path = plot(results)
         if path:
             print(path)

@@ -135,12 +135,50 @@ def throughput_table(results):
     return table(["frame", "element", "frames per second", "ms per frame", "ms over identity"], rows)
 
 
+def video_rows(results):
+    by_system = defaultdict(dict)
+    for r in read(results, "video_summary.csv"):
+        by_system[r["system"]][(r["bin_kind"], r["bin"])] = r
+    return by_system
+
+
+def video_table(results):
+    def number(text, digits):
+        return f"{float(text):.{digits}f}" if text else "-"
+
+    rows = []
+    for system, bins in video_rows(results).items():
+        r = bins.get(("all", "all"))
+        if r:
+            rows.append([system, f"{int(r['markers']):,}", f"{int(r['found']):,}", f"{float(r['recall_pct']):.1f} %",
+                         r["wrong"], number(r["median_translation_pct"], 3), number(r["p90_translation_pct"], 3),
+                         number(r["median_rotation_deg"], 3)])
+    return table(["system", "markers", "found", "recall", "wrong", "translation error median (% of distance)",
+                  "p90", "rotation error median (deg)"], rows)
+
+
+def video_bins_table(results):
+    by_system = video_rows(results)
+    # The bins in the order the file gives them, edges first, then tilts.
+    bins = list(dict.fromkeys(k for b in by_system.values() for k in b if k[0] != "all"))
+    unit = {"edge_px": "px", "tilt_deg": "deg"}
+    rows = []
+    for system, b in by_system.items():
+        rows.append([system] + [f"{float(b[k]['recall_pct']):.1f} %" if k in b and b[k]["recall_pct"] else "-"
+                                for k in bins])
+    counts = next(iter(by_system.values()), {})
+    header = [f"{name} {unit.get(kind, kind)} ({int(counts[(kind, name)]['markers']):,})" if (kind, name) in counts
+              else f"{name} {unit.get(kind, kind)}" for kind, name in bins]
+    return table(["system (recall; markers per bin)"] + header, rows)
+
+
 def main(results):
     results = Path(results)
     for title, make in [("Range", range_table), ("Grazing angle", angle_table), ("Motion blur", blur_table),
                         ("Pose (median rotation deg / translation % of distance)", pose_table),
                         ("False positives", fp_table), ("Funnel", funnel_table), ("Speed", speed_table),
-                        ("Stages", stage_table), ("Throughput", throughput_table)]:
+                        ("Stages", stage_table), ("Throughput", throughput_table), ("Video", video_table),
+                        ("Video recall by projected edge and tilt", video_bins_table)]:
         print(f"### {title}\n\n{make(results)}\n")
 
 
