@@ -27,7 +27,6 @@ void LftagSystem::set_camera(const lftag::Camera& camera, double tag_size) {
   params.families = {family_};
   params.camera = camera;
   params.tag_size = tag_size;
-  params.upsample = upsample_;
   detector_ = std::make_unique<lftag::Detector>(params);
 }
 

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // The LFTag detector of this project as a benchmark system: one family per system, the
-// detector's default parameters, on the frame as it is or enlarged twice (far mode).
+// detector's default parameters.
 #pragma once
 
 #include <memory>
@@ -13,11 +13,9 @@ namespace bench {
 
 class LftagSystem : public FiducialSystem {
  public:
-  explicit LftagSystem(int n, int upsample = 1) : family_(n), upsample_(upsample) {}
+  explicit LftagSystem(int n) : family_(n) {}
 
-  std::string name() const override {
-    return "lftag-" + family_.name() + (upsample_ > 1 ? "-up" + std::to_string(upsample_) : "");
-  }
+  std::string name() const override { return "lftag-" + family_.name(); }
   std::string family() const override { return "lftag-" + family_.name(); }
   std::string dictionary_size() const override { return family_.dictionary_size(); }
   std::vector<std::string> marker_ids(int count, std::uint64_t seed) const override;
@@ -29,7 +27,6 @@ class LftagSystem : public FiducialSystem {
 
  private:
   lftag::Family family_;
-  int upsample_;
   std::unique_ptr<lftag::Detector> detector_;
   lftag::DetectionStats stats_;
 };

@@ -21,8 +21,6 @@ const std::vector<std::pair<std::string, Factory>>& registry() {
     std::vector<std::pair<std::string, Factory>> r;
     for (int n = lftag::Family::kMinN; n <= lftag::Family::kMaxN; ++n) {
       r.emplace_back("lftag-" + lftag::Family(n).name(), [=] { return std::make_unique<LftagSystem>(n); });
-      if (n == 3 || n == 4)
-        r.emplace_back("lftag-" + lftag::Family(n).name() + "-up2", [=] { return std::make_unique<LftagSystem>(n, 2); });
     }
     for (const std::string family : {"16h5", "25h9", "36h11", "41h12"})
       for (int decimate : {1, 2})

@@ -98,7 +98,7 @@ def funnel_table(results):
     sums = defaultdict(float)
     for r in read(results, "fp_counters.csv"):
         sums[(r["system"], r["counter"])] += float(r["value"])
-    systems = sorted({s for s, _ in sums if s.startswith("lftag-") and not s.endswith("up2")})
+    systems = sorted({s for s, _ in sums if s.startswith("lftag-")})
     return table(["constraint"] + systems, [[stage] + [f"{int(sums[(s, stage)]):,}" for s in systems]
                                            for stage in stages])
 

@@ -87,7 +87,6 @@ def main(bench, plot, work):
                 fail(f"{r['system']} found none of the markers composited into video")
 
     meta = json.loads((work / "meta.json").read_text())
-    # A name is also a prefix: lftag-3x3 selects lftag-3x3-up2 (far mode) as well.
     if meta["mode"] != "quick" or not set(SYSTEMS) <= set(meta["systems"]):
         fail("meta.json does not describe the run")
     if not all(e["passed"] for e in meta["experiments"].values()):

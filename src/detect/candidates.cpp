@@ -139,8 +139,9 @@ Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, co
 
 void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
                      const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
-                     DetectionStats& stats, const PatchFrame& patch) {
+                     DetectionStats& stats, const PatchFrame& patch, std::vector<Candidate>* area_rejected) {
   out.clear();
+  if (area_rejected) area_rejected->clear();
   const double pixel_area = 1.0 / (patch.scale * patch.scale);  // of a patch pixel, in frame pixels
   stats.regions += std::int64_t(tree.regions.size());
   int smallest = 1 << 30, largest = 0;
@@ -184,7 +185,10 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
       }
       // Area constraint on the blobs' ink (the zeroth moments, robust at a few pixels),
       // perspective taken out.
-      if (!(ink_spread(c.blobs) <= params.max_area_ratio)) continue;
+      if (!(ink_spread(c.blobs) <= params.max_area_ratio)) {
+        if (area_rejected) area_rejected->push_back(std::move(c));
+        continue;
+      }
       ++stats.area;
       std::vector<cv::Point2d> observed;
       for (const Blob& b : c.blobs) observed.push_back(b.centroid);

@@ -45,7 +45,6 @@ void DetectorParams::validate() const {
   if (families.empty()) fail("no marker family to detect");
   if (threshold_window < 2 || threshold_window > 1024) fail("threshold window must be 2 to 1024 pixels");
   if (threshold_offset < 0 || threshold_offset > 255) fail("threshold offset must be 0 to 255");
-  if (upsample != 1 && upsample != 2) fail("upsample must be 1 or 2");
   if (!(noise_fraction >= 0 && noise_fraction < 1)) fail("noise fraction must be in [0, 1)");
   if (!(noise_ratio >= 1)) fail("the noise ratio must be at least 1");
   if (max_second_looks < 0) fail("the number of second looks must not be negative");
@@ -79,9 +78,27 @@ DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
 
 namespace {
 
-// Key points, decoding and pose of every candidate; detections are appended to `found`.
+CandidateVerdict verdict_of(const detail::Candidate& c, bool second_look, Stage stage) {
+  CandidateVerdict v;
+  v.family = c.family;
+  v.second_look = second_look;
+  v.stage = stage;
+  for (const detail::Blob& b : c.blobs) v.centroids.push_back(b.centroid);
+  return v;
+}
+
+// Whether point q lies inside (or on) the outline of a detection already made.
+bool already_found(const std::vector<Detection>& found, cv::Point2d q) {
+  return std::any_of(found.begin(), found.end(), [&](const Detection& f) {
+    const std::vector<cv::Point2f> outline(f.corners.begin(), f.corners.end());
+    return cv::pointPolygonTest(outline, cv::Point2f(q), false) >= 0;
+  });
+}
+
+// Key points, decoding and pose of every candidate; detections are appended to `found`,
+// except where a detection already stands (a second look can overlap one).
 void decode_candidates(const std::vector<detail::Candidate>& candidates, const ImageView& work, const Camera& camera,
-                       const DetectorParams& p, DetectionStats& stats, DetectionTrace* trace,
+                       const DetectorParams& p, bool second_look, DetectionStats& stats, DetectionTrace* trace,
                        std::vector<Detection>& found) {
   for (const detail::Candidate& c : candidates) {
     if (trace) {
@@ -90,7 +107,9 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
       trace->candidates.push_back(centroids);
     }
     auto start = Clock::now();
-    std::vector<detail::KeyPoints> sides = detail::find_keypoints(c, p, stats);
+    DetectionStats constraints;  // which of the paper's constraints some side passed
+    std::vector<detail::KeyPoints> sides = detail::find_keypoints(c, p, constraints);
+    stats += constraints;
     // The side whose K0 and K1 carry the most ink (perspective taken out) is most likely
     // the baseline: decoding it first usually spares the other three.
     const auto baseline_ink = [&](const detail::KeyPoints& k) {
@@ -104,7 +123,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     // puts squares of the wrong size in the baseline's and data cells' places (spread 2 to
     // 3), so no two sides pass.
     std::optional<detail::KeyPoints> k;
-    std::optional<detail::Decoding> d;
+    std::optional<detail::Decoding> d, best;  // accepted; the best reading of any side (for the trace)
     std::array<bool, 2> passed{};  // residual, margin: for any side
     for (const detail::KeyPoints& side : sides) {
       if (trace) {
@@ -117,6 +136,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
       if (!decoded) continue;
       passed[0] |= decoded->verdict != detail::Verdict::residual;
       passed[1] |= decoded->verdict == detail::Verdict::accepted;
+      if (!best || int(decoded->verdict) > int(best->verdict)) best = decoded;
       if (decoded->verdict == detail::Verdict::accepted && decoded->ink_spread <= p.max_ink_spread) {
         d = decoded;
         k = side;
@@ -124,6 +144,19 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
       }
     }
     stats.residual += passed[0], stats.unambiguous += passed[1];
+    if (trace) {
+      // Where the candidate stopped: the last of the paper's constraints that no side
+      // passed, or the furthest any side's decoding got.
+      Stage stage = Stage::detected;
+      if (!constraints.geometry) stage = Stage::geometry;
+      else if (!constraints.angle) stage = Stage::angle;
+      else if (!constraints.collinearity) stage = Stage::collinearity;
+      else if (!best) stage = Stage::decoding;
+      else if (!d) stage = passed[1] ? Stage::ink : passed[0] ? Stage::margin : Stage::decoding;
+      CandidateVerdict v = verdict_of(c, second_look, stage);
+      if (best) v.reading = best->id, v.decode_error = best->error, v.worst_cell = best->worst_cell;
+      trace->verdicts.push_back(std::move(v));
+    }
     if (!d) continue;
     ++stats.decoded;
 
@@ -139,20 +172,41 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     for (int i = 0; i < 4; ++i) det.keypoints[i] = c.blobs[k->blob[i]].centroid;
     const bool posed = detail::estimate_pose(c, *d, camera, p, det);
     stats.pose_ms += elapsed_ms(start);
-    if (posed) found.push_back(std::move(det));
+    Stage outcome = Stage::detected;
+    if (!posed) outcome = Stage::pose;
+    else if (already_found(found, det.center)) outcome = Stage::duplicate;
+    if (trace) trace->verdicts.back().stage = outcome;
+    if (outcome != Stage::detected) continue;
+    stats.second_look_found += second_look;
+    found.push_back(std::move(det));
   }
 }
 
 }  // namespace
 
+const char* stage_name(Stage stage) {
+  switch (stage) {
+    case Stage::area: return "area";
+    case Stage::geometry: return "geometry";
+    case Stage::angle: return "angle";
+    case Stage::collinearity: return "collinearity";
+    case Stage::decoding: return "decoding";
+    case Stage::margin: return "margin";
+    case Stage::ink: return "ink";
+    case Stage::pose: return "pose";
+    case Stage::duplicate: return "duplicate";
+    case Stage::detected: return "detected";
+  }
+  return "?";
+}
+
 struct Detector::Impl {
   DetectorParams params;
-  cv::Mat upsampled;
   cv::Mat mean;
   detail::BinaryImage binary;
   detail::RegionLabeller labeller;
   detail::RegionTree tree;
-  std::vector<detail::Candidate> candidates;
+  std::vector<detail::Candidate> candidates, area_rejected;
   // The second look's patch and its binary image and tree.
   detail::Patch patch;
   detail::BinaryImage patch_binary;
@@ -192,17 +246,9 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
                                                  std::to_string(image.height) + ")");
   const DetectorParams& p = s.params;
   auto start = Clock::now();
-  // In the enlarged frame everything runs as usual, with a camera of twice the
-  // resolution; the results come back to the frame's pixels at the end.
-  const int up = p.upsample;
-  ImageView work = image;
-  if (up > 1) {
-    cv::resize(image.mat(), s.upsampled, cv::Size(), up, up, cv::INTER_CUBIC);
-    work = ImageView(s.upsampled);
-  }
-  const Camera& native = s.camera_for(image.width, image.height);  // its size is the frame's
-  const Camera camera = up > 1 ? native.for_frame(work.width, work.height) : native;
-  detail::threshold_mean(work, p.threshold_window * up, p.threshold_offset, s.mean, s.binary);
+  const Camera& camera = s.camera_for(image.width, image.height);
+  const ImageView& work = image;
+  detail::threshold_mean(work, p.threshold_window, p.threshold_offset, s.mean, s.binary);
   stats.threshold_ms = elapsed_ms(start);
   if (trace) trace->binary = s.binary.to_mat();
 
@@ -211,13 +257,16 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   stats.regions_ms = elapsed_ms(start);
 
   start = Clock::now();
-  detail::find_candidates(s.tree, s.binary, work, p, camera, s.candidates, stats);
+  detail::find_candidates(s.tree, s.binary, work, p, camera, s.candidates, stats, {},
+                          trace ? &s.area_rejected : nullptr);
   stats.candidates_ms = elapsed_ms(start);
+  if (trace)
+    for (const detail::Candidate& c : s.area_rejected) trace->verdicts.push_back(verdict_of(c, false, Stage::area));
 
-  decode_candidates(s.candidates, work, camera, p, stats, trace, found);
+  decode_candidates(s.candidates, work, camera, p, false, stats, trace, found);
 
   // The second look, around clusters that no detection covers.
-  if (p.second_look && up == 1) {
+  if (p.second_look) {
     start = Clock::now();
     const detail::SecondLook look;
     std::vector<cv::Rect> taken;
@@ -236,43 +285,16 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       detail::binarise_patch(s.patch, 0.5, s.patch_binary);
       s.labeller.label(s.patch_binary, s.patch_tree);
       detail::find_candidates(s.patch_tree, s.patch_binary, ImageView(s.patch.grey), p, camera, s.candidates, stats,
-                              s.patch.frame);
+                              s.patch.frame, trace ? &s.area_rejected : nullptr);
       stats.second_look_ms += elapsed_ms(start);
-      std::vector<Detection> more;
-      decode_candidates(s.candidates, work, camera, p, stats, trace, more);
-      // Neighbouring patches can overlap one marker: the first reading of a place stands.
-      for (Detection& d : more) {
-        const bool seen = std::any_of(found.begin(), found.end(), [&](const Detection& f) {
-          const std::vector<cv::Point2f> outline(f.corners.begin(), f.corners.end());
-          return cv::pointPolygonTest(outline, cv::Point2f(d.center), false) >= 0;
-        });
-        if (seen) continue;
-        ++stats.second_look_found;
-        found.push_back(std::move(d));
+      if (trace) {
+        trace->second_looks.push_back(box);
+        for (const detail::Candidate& c : s.area_rejected) trace->verdicts.push_back(verdict_of(c, true, Stage::area));
       }
+      decode_candidates(s.candidates, work, camera, p, true, stats, trace, found);
     }
   }
 
-  if (up > 1) {
-    const auto back = [up](cv::Point2d& q) { q = (q + cv::Point2d(0.5, 0.5)) / up - cv::Point2d(0.5, 0.5); };
-    for (Detection& d : found) {
-      for (cv::Point2d& q : d.centroids) back(q);
-      for (cv::Point2d& q : d.keypoints) back(q);
-      for (cv::Point2d& q : d.corners) back(q);
-      back(d.center);
-      d.reprojection_error /= up;
-    }
-    if (trace) {
-      for (auto& blobs : trace->candidates)
-        for (cv::Point2d& q : blobs) back(q);
-      for (auto& k : trace->keypoints)
-        for (cv::Point2d& q : k) back(q);
-      for (auto& candidate : trace->hypotheses)
-        for (auto& outline : candidate)
-          for (cv::Point2d& q : outline) back(q);
-      cv::resize(trace->binary, trace->binary, cv::Size(image.width, image.height), 0, 0, cv::INTER_NEAREST);
-    }
-  }
   if (trace) trace->detections = found;
   if (stats_out) *stats_out += stats;
   return found;

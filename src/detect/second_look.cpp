@@ -62,14 +62,22 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
   }
   std::vector<int> parent(small.size());
   std::iota(parent.begin(), parent.end(), 0);
-  for (std::size_t i = 0; i < small.size(); ++i) {
-    const Cluster& a = small[i];
-    for (std::size_t j = i + 1; j < small.size() && small[j].y0 <= a.y1 + 1; ++j) {
-      const Cluster& b = small[j];
-      if (b.x0 > a.x1 + 1 || a.x0 > b.x1 + 1) continue;
-      parent[find_root(parent, int(j))] = find_root(parent, int(i));
+  // Regions meet only regions of the same 64-pixel column strip: each strip lists the
+  // regions that reach into it, still top to bottom.
+  constexpr int kStrip = 64;
+  std::vector<std::vector<int>> strips((binary.width + kStrip) / kStrip + 1);
+  for (int i = 0; i < int(small.size()); ++i)
+    for (int t = std::max(0, small[i].x0 - 1) / kStrip; t <= (small[i].x1 + 1) / kStrip; ++t)
+      strips[std::min(t, int(strips.size()) - 1)].push_back(i);
+  for (const std::vector<int>& strip : strips)
+    for (std::size_t i = 0; i < strip.size(); ++i) {
+      const Cluster& a = small[strip[i]];
+      for (std::size_t j = i + 1; j < strip.size() && small[strip[j]].y0 <= a.y1 + 1; ++j) {
+        const Cluster& b = small[strip[j]];
+        if (b.x0 > a.x1 + 1 || a.x0 > b.x1 + 1) continue;
+        parent[find_root(parent, strip[j])] = find_root(parent, strip[i]);
+      }
     }
-  }
   std::vector<Cluster> clusters(small.size(), Cluster{1 << 30, 1 << 30, -1, -1, 0, 0});
   for (std::size_t i = 0; i < small.size(); ++i) {
     const Cluster& g = small[i];
@@ -119,20 +127,43 @@ bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look,
   const int scale = side < look.enlarge_below ? 2 : 1;
   patch.frame.origin = area.tl();
   patch.frame.scale = scale;
+  // The patch's images are views of buffers kept from patch to patch.
+  const cv::Size size(area.width * scale, area.height * scale);
+  const auto view = [&](cv::Mat& buffer) {
+    if (buffer.cols < size.width || buffer.rows < size.height)
+      buffer.create(std::max(size.height, buffer.rows), std::max(size.width, buffer.cols), CV_8UC1);
+    return buffer(cv::Rect(cv::Point(), size));
+  };
+  patch.grey = view(patch.grey_buffer);
   if (scale > 1) {
-    cv::Mat enlarged, blurred;
-    cv::resize(native, enlarged, cv::Size(), scale, scale, cv::INTER_CUBIC);
+    cv::Mat enlarged = view(patch.enlarged_buffer), blurred = view(patch.blurred_buffer);
+    cv::resize(native, enlarged, size, 0, 0, cv::INTER_CUBIC);
     cv::GaussianBlur(enlarged, blurred, cv::Size(0, 0), 0.5 * scale);
     cv::addWeighted(enlarged, 2.0, blurred, -1.0, 0, patch.grey);
   } else {
     native.copyTo(patch.grey);
   }
   // The darkest and brightest levels within about a third of the cluster (a marker cell
-  // or more): every square then sees the paper of the gaps beside it.
+  // or more), so that every square sees the paper of the gaps beside it: the extremes of
+  // tiles of a ninth of the cluster, then of each tile's 3 x 3 neighbourhood (the tiles
+  // keep this linear in the patch's pixels, where a sliding window was not).
   const int window = std::max(9, side * scale / 3) | 1;
-  const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(window, window));
-  cv::erode(patch.grey, patch.dark, kernel);
-  cv::dilate(patch.grey, patch.bright, kernel);
+  const int tile = std::max(2, window / 3);
+  const int tw = (patch.grey.cols + tile - 1) / tile, th = (patch.grey.rows + tile - 1) / tile;
+  cv::Mat1b lo(th, tw, std::uint8_t(255)), hi(th, tw, std::uint8_t(0));
+  for (int y = 0; y < patch.grey.rows; ++y) {
+    const std::uint8_t* g = patch.grey.ptr<std::uint8_t>(y);
+    std::uint8_t* l = lo.ptr<std::uint8_t>(y / tile);
+    std::uint8_t* h = hi.ptr<std::uint8_t>(y / tile);
+    for (int x = 0; x < patch.grey.cols; ++x) {
+      l[x / tile] = std::min(l[x / tile], g[x]);
+      h[x / tile] = std::max(h[x / tile], g[x]);
+    }
+  }
+  cv::erode(lo, lo, cv::Mat());  // 3 x 3
+  cv::dilate(hi, hi, cv::Mat());
+  cv::resize(lo, patch.dark, cv::Size(tw * tile, th * tile), 0, 0, cv::INTER_NEAREST);
+  cv::resize(hi, patch.bright, cv::Size(tw * tile, th * tile), 0, 0, cv::INTER_NEAREST);
   return true;
 }
 

@@ -126,10 +126,12 @@ struct Candidate {
 
 // Topological filtering, vertex estimation and the area constraint. Counts into stats.
 // `image` and `binary` may be a patch of the frame (see PatchFrame): the candidates'
-// centroids, areas and inks are then given in the frame's pixels.
+// centroids, areas and inks are then given in the frame's pixels. Candidates that fail
+// the area constraint go to `area_rejected` when it is not null (for the trace).
 void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
                      const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
-                     DetectionStats& stats, const PatchFrame& patch = {});
+                     DetectionStats& stats, const PatchFrame& patch = {},
+                     std::vector<Candidate>* area_rejected = nullptr);
 
 // Centroid of the inverted grey image over `region` with its holes and the white pixels
 // within `reach` pixels of it that are nearer to it than to any other black pixel. `white` is the grey
@@ -154,6 +156,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
 struct Patch {
   cv::Mat grey, dark, bright;
   PatchFrame frame;
+  cv::Mat grey_buffer, enlarged_buffer, blurred_buffer;  // kept between patches
 };
 
 // The neighbourhood of `box` enlarged as `look` says; false when it is empty.

@@ -36,11 +36,30 @@ nlohmann::json stats_json(const DetectionStats& s) {
   return {{"funnel",
            {{"regions", s.regions}, {"topology", s.topology}, {"area", s.area}, {"geometry", s.geometry},
             {"angle", s.angle}, {"collinearity", s.collinearity}, {"residual", s.residual},
-            {"unambiguous", s.unambiguous}, {"decoded", s.decoded}}},
+            {"unambiguous", s.unambiguous}, {"decoded", s.decoded}, {"second_looks", s.second_looks},
+            {"second_look_found", s.second_look_found}}},
           {"time_ms",
            {{"threshold", s.threshold_ms}, {"regions", s.regions_ms}, {"candidates", s.candidates_ms},
             {"keypoints", s.keypoints_ms}, {"hypotheses", s.hypotheses_ms}, {"decode", s.decode_ms},
-            {"pose", s.pose_ms}, {"total", s.total_ms()}}}};
+            {"pose", s.pose_ms}, {"second_look", s.second_look_ms}, {"total", s.total_ms()}}}};
+}
+
+// One topological candidate and the stage that stopped it (--why).
+nlohmann::json verdict_json(const CandidateVerdict& v) {
+  cv::Point2d mean;
+  for (const cv::Point2d& q : v.centroids) mean += q;
+  mean *= 1.0 / std::max<std::size_t>(1, v.centroids.size());
+  nlohmann::json out = {{"family", v.family.name()},
+                        {"stage", stage_name(v.stage)},
+                        {"second_look", v.second_look},
+                        {"center", {mean.x, mean.y}},
+                        {"centroids", points_json(v.centroids)}};
+  if (v.reading) {
+    out["reading"] = id_json(*v.reading);
+    out["decode_error"] = v.decode_error;
+    out["worst_cell"] = v.worst_cell;
+  }
+  return out;
 }
 
 }  // namespace
@@ -50,8 +69,8 @@ void add_detect_command(CLI::App& app, int& status) {
     std::vector<std::string> images;
     std::string families = "3x3,4x4", calibration, debug_dir;
     double fx = NAN, fy = NAN, cx = NAN, cy = NAN, tag_size = 0.1;
-    int window = 16, offset = 4, upsample = 1;
-    bool stats = false;
+    int window = 16, offset = 4;
+    bool stats = false, why = false;
   };
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("detect", "Detect markers in images; prints one JSON object per image (JSON Lines).");
@@ -71,10 +90,10 @@ void add_detect_command(CLI::App& app, int& status) {
       ->check(CLI::Range(2, 1024));
   cmd->add_option("--threshold-offset", opt->offset, "Grey levels below the mean for black (default 4)")
       ->check(CLI::Range(0, 255));
-  cmd->add_option("--upsample", opt->upsample,
-                  "1, or 2 to detect on the image enlarged twice: farther and steeper markers, 4x the time")
-      ->check(CLI::IsMember({1, 2}));
   cmd->add_flag("--stats", opt->stats, "Add the candidate funnel and per-stage times to each object");
+  cmd->add_flag("--why", opt->why,
+                "Add \"candidates\": every topological candidate with the stage that stopped it (area, "
+                "geometry, angle, collinearity, decoding, margin, ink, pose, duplicate) or \"detected\"");
   cmd->add_option("--debug-dir", opt->debug_dir,
                   "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
   cmd->callback([opt, &status] {
@@ -84,7 +103,6 @@ void add_detect_command(CLI::App& app, int& status) {
       base.tag_size = opt->tag_size;
       base.threshold_window = opt->window;
       base.threshold_offset = opt->offset;
-      base.upsample = opt->upsample;
       if (!opt->calibration.empty()) {
         base.camera = Camera::load(opt->calibration);
       } else if (!std::isnan(opt->fx)) {
@@ -122,11 +140,15 @@ void add_detect_command(CLI::App& app, int& status) {
         DetectionTrace trace;
         const auto start = std::chrono::steady_clock::now();
         const std::vector<Detection> found =
-            it->second.detect(ImageView(grey), &stats, opt->debug_dir.empty() ? nullptr : &trace);
+            it->second.detect(ImageView(grey), &stats, opt->debug_dir.empty() && !opt->why ? nullptr : &trace);
         out["time_ms"] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         out["detections"] = nlohmann::json::array();
         for (const Detection& d : found) out["detections"].push_back(detection_json(d));
         if (opt->stats) out["stats"] = stats_json(stats);
+        if (opt->why) {
+          out["candidates"] = nlohmann::json::array();
+          for (const CandidateVerdict& v : trace.verdicts) out["candidates"].push_back(verdict_json(v));
+        }
         total += stats;
         if (!opt->debug_dir.empty()) {
           const Camera camera = it->second.params().camera.fx > 0

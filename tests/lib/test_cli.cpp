@@ -158,6 +158,40 @@ TEST(Cli, DetectStatsAndDebugImages) {
     EXPECT_FALSE(cv::imread(dir + "/det_stats-" + stage + ".png").empty()) << stage;
 }
 
+TEST(Cli, DetectWhyNamesTheStageThatStoppedEachCandidate) {
+  // A far 3x3 (13 px) on a white margin, found by the second look, beside a steeply
+  // tilted one: --why lists every candidate with its stage.
+  const std::string img = kTmp + "/why.png", scene = kTmp + "/why-scene.json";
+  std::ofstream(scene) << R"({"markers": [
+    {"family": "3x3", "id": 6789, "tag_size": 1, "tvec": [-6, 0, 26], "roll": 45},
+    {"family": "3x3", "id": 12345, "tag_size": 1, "tvec": [1, 0, 3], "tilt": 86}]})";
+  ASSERT_EQ(run("render --margin 6 --scene " + scene + " --output " + img).status, 0);
+  const CliResult r = run("detect --why --stats --family 3x3 " + img);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto lines = json_lines(r.output);
+  ASSERT_EQ(lines.size(), 1u) << r.output;
+  const auto& o = lines[0];
+  ASSERT_EQ(o["detections"].size(), 1u) << r.output;
+  EXPECT_EQ(o["detections"][0]["id"], 6789);
+  EXPECT_GE(o["stats"]["funnel"]["second_looks"].get<int>(), 1);
+  EXPECT_EQ(o["stats"]["funnel"]["second_look_found"], 1);
+  ASSERT_FALSE(o["candidates"].empty());
+  const std::set<std::string> known = {"area",   "geometry", "angle", "collinearity", "decoding",
+                                       "margin", "ink",      "pose",  "duplicate",    "detected"};
+  int detected = 0;
+  for (const auto& c : o["candidates"]) {
+    EXPECT_EQ(known.count(c["stage"].get<std::string>()), 1u) << c;
+    EXPECT_EQ(c["centroids"].size(), 9u);
+    if (c["stage"] != "detected") continue;
+    ++detected;
+    EXPECT_TRUE(c["second_look"].get<bool>());
+    EXPECT_EQ(c["reading"], 6789);
+  }
+  EXPECT_EQ(detected, 1);
+  // Without --why there are no candidates.
+  EXPECT_FALSE(json_lines(run("detect " + img).output)[0].contains("candidates"));
+}
+
 TEST(Cli, DetectRejectsBadConfiguration) {
   CliResult r = run("detect --family 3x4 x.png");
   EXPECT_EQ(r.status, 2);
@@ -165,9 +199,9 @@ TEST(Cli, DetectRejectsBadConfiguration) {
   r = run("detect --calibration /nonexistent.yml x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("/nonexistent.yml"), std::string::npos) << r.output;
-  r = run("detect --upsample 3 x.png");
+  r = run("detect --threshold-window 1 x.png");
   EXPECT_EQ(r.status, 2);
-  EXPECT_NE(r.output.find("--upsample"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--threshold-window"), std::string::npos) << r.output;
   r = run("detect --cx 100 x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("need --fx"), std::string::npos) << r.output;

@@ -12,6 +12,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -57,10 +58,6 @@ struct DetectorParams {
   //    as 0 in every range, blur, noise and low-light test.
   int threshold_window = 16;  // M (paper: 16)
   int threshold_offset = 4;   // grey levels
-  // 1, or 2 to detect on the frame enlarged twice (bicubic): far and steeply tilted
-  // markers keep their structure longer (see the README for the figures) at five to six
-  // times the cost. Results are in the frame's own pixels either way.
-  int upsample = 1;
 
   // -- Second look: small, isolated clusters of black regions where no marker was found
   //    (markers at about half a pixel per unit, whose gaps the frame's binary image closes)
@@ -169,13 +166,40 @@ struct DetectionStats {
   DetectionStats& operator+=(const DetectionStats& other);
 };
 
-// What the stages saw, for debug images (see draw.hpp): filled only on request.
+// Where a topological candidate stopped, in pipeline order.
+enum class Stage {
+  area,          // the area constraint (tau1)
+  geometry,      // the geometry constraint, on every side of the hull
+  angle,         // the angle constraint
+  collinearity,  // the collinearity constraint (tau2)
+  decoding,      // no reading within tau3 and the cell residual bound
+  margin,        // another id fitted within the decoding margin
+  ink,           // the squares' ink did not match the design on any side
+  pose,          // no pose could be computed
+  duplicate,     // a marker already found at its place
+  detected,
+};
+const char* stage_name(Stage stage);  // "area", ..., "detected"
+
+// One topological candidate and its fate (lftag detect --why prints these).
+struct CandidateVerdict {
+  Family family{3};
+  bool second_look = false;             // found in an enlarged patch
+  std::vector<cv::Point2d> centroids;   // its n^2 blobs, frame pixels
+  Stage stage = Stage::detected;
+  std::optional<TagId> reading;         // the best reading, when decoding ran
+  double decode_error = 0, worst_cell = 0;  // of that reading
+};
+
+// What the stages saw, for debug images (see draw.hpp) and for tuning: filled only on request.
 struct DetectionTrace {
   cv::Mat binary;                                     // 255 = black, as thresholded
   std::vector<std::vector<cv::Point2d>> candidates;   // blob centroids of every topological candidate
   std::vector<std::array<cv::Point2d, 4>> keypoints;  // K0..K3 of candidates that passed the constraints
   std::vector<std::vector<std::vector<cv::Point2d>>> hypotheses;  // per candidate: 16 projected inner edges
   std::vector<Detection> detections;
+  std::vector<CandidateVerdict> verdicts;             // every topological candidate
+  std::vector<cv::Rect> second_looks;                 // the clusters looked at again
 };
 
 class Detector {

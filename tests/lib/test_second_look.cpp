@@ -1,0 +1,148 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// The second look (src/detect/second_look.cpp): which clusters of the frame's binary image
+// are looked at again, and how their patch is enlarged and binarised.
+#include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "binary.hpp"
+#include "lftag/render.hpp"
+#include "stages.hpp"
+
+using namespace lftag;
+
+namespace {
+
+std::vector<cv::Rect> clusters_of(const cv::Mat1b& black, const std::vector<cv::Rect>& taken = {}) {
+  const detail::BinaryImage binary = test::binary_from_mask(black);
+  detail::RegionTree tree;
+  detail::RegionLabeller().label(binary, tree);
+  return detail::near_candidates(tree, binary, detail::SecondLook{}, taken);
+}
+
+// A far marker as its binary image shows it: half ink, in pieces that touch only at
+// their corners (black is 4-connected), here a 20 x 20 checkerboard of 2 x 2 pieces at
+// (x, y).
+void draw_pieces(cv::Mat1b& black, int x, int y) {
+  for (int i = 0; i < 10; ++i)
+    for (int j = 0; j < 10; ++j)
+      if ((i + j) % 2 == 0) black(cv::Rect(x + 2 * j, y + 2 * i, 2, 2)).setTo(255);
+}
+
+}  // namespace
+
+TEST(NearCandidates, AClusterOfPiecesOnPaperIsLookedAt) {
+  cv::Mat1b black(120, 160, std::uint8_t(0));
+  draw_pieces(black, 30, 40);
+  const std::vector<cv::Rect> boxes = clusters_of(black);
+  ASSERT_EQ(boxes.size(), 1u);
+  EXPECT_EQ(boxes[0], cv::Rect(30, 40, 20, 20));
+}
+
+TEST(NearCandidates, BlobsLettersTexturesAndTakenPlacesAreNot) {
+  cv::Mat1b black(120, 300, std::uint8_t(0));
+  black(cv::Rect(10, 10, 20, 20)).setTo(255);  // a solid blob: all ink
+  cv::circle(black, cv::Point(60, 20), 8, 255, 2);  // a letter o: one piece and its hole
+  cv::line(black, cv::Point(100, 10), cv::Point(160, 25), 255, 2);  // a stroke: too thin a box
+  EXPECT_TRUE(clusters_of(black).empty());
+  // Pieces on a dark ground rather than on paper.
+  cv::Mat1b ground(120, 160, std::uint8_t(0));
+  draw_pieces(ground, 30, 40);
+  ground(cv::Rect(20, 30, 40, 9)).setTo(255), ground(cv::Rect(20, 61, 40, 9)).setTo(255);
+  ground(cv::Rect(20, 39, 9, 22)).setTo(255), ground(cv::Rect(51, 39, 9, 22)).setTo(255);
+  EXPECT_TRUE(clusters_of(ground).empty());
+  // A texture of pieces larger than any marker looked at.
+  cv::Mat1b texture(300, 300, std::uint8_t(0));
+  for (int y = 0; y < 10; ++y)
+    for (int x = 0; x < 10; ++x) draw_pieces(texture, 20 + 20 * x, 20 + 20 * y);
+  EXPECT_TRUE(clusters_of(texture).empty());
+  // A marker already found there.
+  cv::Mat1b alone(120, 160, std::uint8_t(0));
+  draw_pieces(alone, 30, 40);
+  EXPECT_TRUE(clusters_of(alone, {cv::Rect(25, 35, 30, 30)}).empty());
+  EXPECT_EQ(clusters_of(alone, {cv::Rect(100, 35, 30, 30)}).size(), 1u);
+  // Too small, too large.
+  cv::Mat1b tiny(60, 60, std::uint8_t(0));
+  tiny(cv::Rect(20, 20, 2, 2)).setTo(255), tiny(cv::Rect(23, 20, 2, 2)).setTo(255);
+  tiny(cv::Rect(20, 23, 2, 2)).setTo(255), tiny(cv::Rect(23, 23, 2, 2)).setTo(255);
+  EXPECT_TRUE(clusters_of(tiny).empty());
+  cv::Mat1b huge(400, 400, std::uint8_t(0));
+  for (int y = 0; y < 10; ++y)
+    for (int x = 0; x < 10; ++x) huge(cv::Rect(50 + 25 * x, 50 + 25 * y, 16, 16)).setTo(255);
+  EXPECT_TRUE(clusters_of(huge).empty());
+}
+
+TEST(SecondLookPatch, ReopensOnePixelGapsBesideABrightMargin) {
+  // A 3x3 marker at 0.55 pixels per unit (13 px across) with a quarter-tag white margin on
+  // mid-grey, turned 30 degrees: the frame's 16 px mean threshold joins squares to the
+  // border, so its white region has fewer than 9 children; the enlarged patch, binarised
+  // at its local midpoint, separates all nine again.
+  const Family f(3);
+  SceneParams sp;
+  sp.camera = Camera::pinhole(320, 320, 49.5, 49.5, 100, 100);
+  SceneMarker m;
+  m.id = 6789;
+  m.margin_units = 6;
+  m.tvec = {0.003, -0.002, 24.0};
+  m.rvec = rotation_from_angles(30, 0, 0);
+  const RenderedScene scene = render_scene(sp, {m});
+  const ImageView view(scene.image);
+
+  auto most_children = [](const detail::RegionTree& tree) {
+    int most = 0;
+    for (const detail::Region& r : tree.regions)
+      if (!r.black && &r != &tree.regions[0]) most = std::max(most, r.child_count);
+    return most;
+  };
+  detail::BinaryImage binary;
+  cv::Mat mean;
+  detail::threshold_mean(view, 16, 4, mean, binary);
+  detail::RegionTree tree;
+  detail::RegionLabeller labeller;
+  labeller.label(binary, tree);
+  EXPECT_LT(most_children(tree), 9) << "the frame's threshold keeps the marker: no test of the second look";
+
+  const std::vector<cv::Rect> boxes = detail::near_candidates(tree, binary, detail::SecondLook{}, {});
+  ASSERT_EQ(boxes.size(), 1u);
+  const cv::Rect truth = cv::boundingRect(std::vector<cv::Point2f>(scene.truth[0].corners.begin(), scene.truth[0].corners.end()));
+  EXPECT_GE((boxes[0] & truth).area(), truth.area() / 2);
+
+  detail::Patch patch;
+  ASSERT_TRUE(detail::enlarge_patch(view, boxes[0], detail::SecondLook{}, patch));
+  EXPECT_EQ(patch.frame.scale, 2);
+  EXPECT_EQ(patch.grey.size(), cv::Size(patch.grey.cols, patch.grey.rows));
+  // The patch maps back onto the frame: its pixel centres at (p + 0.5) / 2 - 0.5 + origin.
+  const cv::Point2d back = patch.frame.to_frame({1.5, 1.5});
+  EXPECT_DOUBLE_EQ(back.x, patch.frame.origin.x + 0.5);
+  EXPECT_DOUBLE_EQ(back.y, patch.frame.origin.y + 0.5);
+  detail::BinaryImage patch_binary;
+  detail::binarise_patch(patch, 0.5, patch_binary);
+  detail::RegionTree patch_tree;
+  labeller.label(patch_binary, patch_tree);
+  EXPECT_EQ(most_children(patch_tree), 9);
+
+  // Its candidate's centroids, taken back to the frame, lie on the truth.
+  DetectorParams params;
+  params.families = {f};
+  std::vector<detail::Candidate> out;
+  DetectionStats stats;
+  detail::find_candidates(patch_tree, patch_binary, ImageView(patch.grey), params, sp.camera, out, stats, patch.frame);
+  ASSERT_EQ(out.size(), 1u);
+  for (const detail::Blob& b : out[0].blobs) {
+    double nearest = 1e9;
+    for (const cv::Point2d& t : scene.truth[0].centroids) nearest = std::min(nearest, cv::norm(b.centroid - t));
+    EXPECT_LT(nearest, 0.2);  // pixels, at 0.55 pixels per unit
+  }
+}
+
+TEST(SecondLookPatch, AFlatPatchHasNoBlack) {
+  // Where the local range is below a printed contrast, nothing is black (shading on paper).
+  cv::Mat1b flat(60, 60);
+  for (int y = 0; y < 60; ++y)
+    for (int x = 0; x < 60; ++x) flat(y, x) = cv::saturate_cast<std::uint8_t>(190 + x / 6 + y / 10);
+  detail::Patch patch;
+  ASSERT_TRUE(detail::enlarge_patch(ImageView(flat), cv::Rect(20, 20, 20, 20), detail::SecondLook{}, patch));
+  detail::BinaryImage binary;
+  detail::binarise_patch(patch, 0.5, binary);
+  for (std::uint64_t word : binary.bits) EXPECT_EQ(word, 0u);
+}
