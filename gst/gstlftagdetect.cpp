@@ -105,7 +105,7 @@ enum
   PROP_MESSAGE,
   PROP_THRESHOLD_WINDOW,
   PROP_THRESHOLD_OFFSET,
-  PROP_UPSAMPLE,
+  PROP_SECOND_LOOK,
   PROP_MAX_AREA_RATIO,
   PROP_MIN_SPREAD_RATIO,
   PROP_MAX_DECODE_ERROR,
@@ -169,12 +169,13 @@ struct DetectorSettings {
   double fx = DEFAULT_PROP_FOCAL, fy = DEFAULT_PROP_FOCAL;
   double cx = DEFAULT_PROP_PRINCIPAL, cy = DEFAULT_PROP_PRINCIPAL;
   std::vector<double> distortion;
-  int threshold_window = 0, threshold_offset = 0, upsample = 1;
-  double max_area_ratio = 0, min_spread_ratio = 0, max_decode_error = 0, max_cell_residual = 0;
+  int threshold_window = 0, threshold_offset = 0;
+  bool second_look = true;
+  double max_ink_ratio = 0, min_spread_ratio = 0, max_decode_error = 0, max_cell_residual = 0;
 
   auto tie () const {
     return std::tie (families, tag_size, fx, fy, cx, cy, distortion, threshold_window,
-        threshold_offset, upsample, max_area_ratio, min_spread_ratio, max_decode_error,
+        threshold_offset, second_look, max_ink_ratio, min_spread_ratio, max_decode_error,
         max_cell_residual);
   }
   bool operator== (const DetectorSettings & o) const { return tie () == o.tie (); }
@@ -196,8 +197,8 @@ struct Settings {
     detector.families = Family::parse_list (DEFAULT_PROP_FAMILIES);
     detector.threshold_window = defaults.threshold_window;
     detector.threshold_offset = defaults.threshold_offset;
-    detector.upsample = defaults.upsample;
-    detector.max_area_ratio = defaults.max_area_ratio;
+    detector.second_look = defaults.second_look;
+    detector.max_ink_ratio = defaults.max_ink_ratio;
     detector.min_spread_ratio = defaults.min_spread_ratio;
     detector.max_cell_residual = defaults.max_cell_residual;
   }
@@ -254,8 +255,8 @@ detector_params (const DetectorSettings & s, const Camera & camera)
   p.camera = camera;
   p.threshold_window = s.threshold_window;
   p.threshold_offset = s.threshold_offset;
-  p.upsample = s.upsample;
-  p.max_area_ratio = s.max_area_ratio;
+  p.second_look = s.second_look;
+  p.max_ink_ratio = s.max_ink_ratio;
   p.min_spread_ratio = s.min_spread_ratio;
   p.max_cell_residual = s.max_cell_residual;
   if (s.max_decode_error > 0)
@@ -399,17 +400,17 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
           "Grey levels below the window's mean for a pixel to count as black; "
           "raising it ignores faint texture and noise",
           0, 255, defaults.threshold_offset, playing));
-  g_object_class_install_property (gobject_class, PROP_UPSAMPLE,
-      g_param_spec_int ("upsample", "Upsample",
-          "1, or 2 to detect on the frame enlarged twice: far and steeply tilted "
-          "markers are found further away, at five to six times the cost",
-          1, 2, defaults.upsample, playing));
+  g_object_class_install_property (gobject_class, PROP_SECOND_LOOK,
+      g_param_spec_boolean ("second-look", "Second look",
+          "Look again, enlarged and with a local threshold, at small isolated "
+          "clusters where no marker was found: far, small and defocused markers",
+          defaults.second_look, playing));
   g_object_class_install_property (gobject_class, PROP_MAX_AREA_RATIO,
       g_param_spec_double ("max-area-ratio", "Maximum area ratio",
           "tau1: a candidate is rejected when its largest black square is larger "
           "than this many times its smallest, once perspective is taken out (the "
           "design ratio is 1.78)",
-          1.0, 100.0, defaults.max_area_ratio, playing));
+          1.0, 100.0, defaults.max_ink_ratio, playing));
   g_object_class_install_property (gobject_class, PROP_MIN_SPREAD_RATIO,
       g_param_spec_double ("min-spread-ratio", "Minimum spread ratio",
           "tau2: a candidate is rejected when its squares' centres are this close to "
@@ -549,11 +550,11 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
     case PROP_THRESHOLD_OFFSET:
       s.detector.threshold_offset = g_value_get_int (value);
       break;
-    case PROP_UPSAMPLE:
-      s.detector.upsample = g_value_get_int (value);
+    case PROP_SECOND_LOOK:
+      s.detector.second_look = g_value_get_boolean (value);
       break;
     case PROP_MAX_AREA_RATIO:
-      s.detector.max_area_ratio = g_value_get_double (value);
+      s.detector.max_ink_ratio = g_value_get_double (value);
       break;
     case PROP_MIN_SPREAD_RATIO:
       s.detector.min_spread_ratio = g_value_get_double (value);
@@ -619,11 +620,11 @@ gst_lftag_detect_get_property (GObject * object, guint prop_id, GValue * value,
     case PROP_THRESHOLD_OFFSET:
       g_value_set_int (value, s.detector.threshold_offset);
       break;
-    case PROP_UPSAMPLE:
-      g_value_set_int (value, s.detector.upsample);
+    case PROP_SECOND_LOOK:
+      g_value_set_boolean (value, s.detector.second_look);
       break;
     case PROP_MAX_AREA_RATIO:
-      g_value_set_double (value, s.detector.max_area_ratio);
+      g_value_set_double (value, s.detector.max_ink_ratio);
       break;
     case PROP_MIN_SPREAD_RATIO:
       g_value_set_double (value, s.detector.min_spread_ratio);

@@ -34,7 +34,7 @@ double white_level(const RegionTree& tree, int region, const ImageView& image) {
 // Face-on this is the design's 16/9 or less; tilted 60 degrees at two tag sizes the raw
 // ratio already passes 6, while this stays near the design's.
 // Each blob keeps its normalised ink as relative_ink (its raw ink when no plane fits).
-double ink_spread(std::vector<Blob>& blobs) {
+double perspective_free_ink_ratio(std::vector<Blob>& blobs) {
   double lo = 1e300, hi = 0;
   for (Blob& b : blobs) {
     b.relative_ink = b.mass;
@@ -159,7 +159,7 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
     const int* child = tree.children_of(r);
     int largest_child = 0;
     for (int i = 0; i < white.child_count; ++i) largest_child = std::max(largest_child, tree.regions[child[i]].area);
-    const double noise = std::max(white.area * params.noise_fraction, largest_child / params.noise_ratio);
+    const double noise = std::max(white.area * params.min_child_fraction, largest_child / params.max_child_ratio);
     kids.clear();
     for (int i = 0; i < white.child_count; ++i)
       if (tree.regions[child[i]].area >= noise) kids.push_back(child[i]);
@@ -185,7 +185,7 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
       }
       // Area constraint on the blobs' ink (the zeroth moments, robust at a few pixels),
       // perspective taken out.
-      if (!(ink_spread(c.blobs) <= params.max_area_ratio)) {
+      if (!(perspective_free_ink_ratio(c.blobs) <= params.max_ink_ratio)) {
         if (area_rejected) area_rejected->push_back(std::move(c));
         continue;
       }

@@ -148,7 +148,7 @@ double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const I
 }
 
 // See Decoding::ink_spread.
-double ink_spread(const Candidate& c, const Decoding& d) {
+double square_ink_spread(const Candidate& c, const Decoding& d) {
   const Family& f = c.family;
   std::vector<cv::Point2d> units;
   std::vector<double> area;
@@ -336,7 +336,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
       return best;
     }
   best.verdict = Verdict::accepted;
-  best.ink_spread = ink_spread(c, best);
+  best.ink_spread = square_ink_spread(c, best);
   return best;
 }
 

@@ -45,12 +45,12 @@ void DetectorParams::validate() const {
   if (families.empty()) fail("no marker family to detect");
   if (threshold_window < 2 || threshold_window > 1024) fail("threshold window must be 2 to 1024 pixels");
   if (threshold_offset < 0 || threshold_offset > 255) fail("threshold offset must be 0 to 255");
-  if (!(noise_fraction >= 0 && noise_fraction < 1)) fail("noise fraction must be in [0, 1)");
-  if (!(noise_ratio >= 1)) fail("the noise ratio must be at least 1");
+  if (!(min_child_fraction >= 0 && min_child_fraction < 1)) fail("the minimum child fraction must be in [0, 1)");
+  if (!(max_child_ratio >= 1)) fail("the maximum child ratio must be at least 1");
   if (max_second_looks < 0) fail("the number of second looks must not be negative");
   if (max_extra_children < 0 || max_extra_children > 64) fail("extra children must be 0 to 64");
   if (dilation < 0 || dilation > 8) fail("dilation must be 0 to 8 pixels");
-  if (!(max_area_ratio >= 1)) fail("the area ratio (tau1) must be at least 1");
+  if (!(max_ink_ratio >= 1)) fail("the ink ratio (tau1) must be at least 1");
   if (!(min_spread_ratio >= 0 && min_spread_ratio <= 1)) fail("the spread ratio (tau2) must be in [0, 1]");
   if (!(max_cell_residual > 0 && max_cell_residual <= 1)) fail("the cell residual bound must be in (0, 1] units");
   if (!(max_ink_spread >= 1)) fail("the ink spread bound must be at least 1");

@@ -1,6 +1,25 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // The detector's stages as plain functions over plain data, in pipeline order
 // (paper section IV). Private to the library.
+//
+// The paper's symbols and where they live:
+//
+//   paper                     parameter (DetectorParams)        function (file)
+//   M, mean threshold         threshold_window (+ _offset)      threshold_mean (threshold.cpp)
+//   topological CCA           -                                 RegionLabeller::label (regions.cpp)
+//   n^2 children, noise       min_child_fraction,               find_candidates (candidates.cpp)
+//                             max_child_ratio, max_extra_children
+//   delta, vertex estimation  dilation, centroid_reference      measure_blob (candidates.cpp)
+//   tau1, area constraint     max_ink_ratio                     perspective_free_ink_ratio (candidates.cpp)
+//   K0, K1 (baseline), K2, K3 -                                 hull_corners, find_keypoints (keypoints.cpp)
+//   geometry, angle           -                                 find_keypoints (keypoints.cpp)
+//   tau2, collinearity        min_spread_ratio (scale-free)     spread_ratio (keypoints.cpp)
+//   16 hypotheses, gradient   -                                 decode, edge_gradient (decode.cpp)
+//   tau3, decoding error      max_decode_error,                 decode (decode.cpp)
+//                             max_cell_residual, min_decode_margin, max_ink_spread
+//   final pose (IPPE)         refine_pose, tag_size, camera     estimate_pose (pose.cpp)
+//   (not in the paper)        second_look, max_second_looks     near_candidates, enlarge_patch,
+//                                                               binarise_patch (second_look.cpp)
 #pragma once
 
 #include <algorithm>

@@ -449,8 +449,8 @@ TEST(FindCandidates, NoiseChildrenAreIgnored) {
   // between 1 and 4 px, the four 2 x 2 specks count and the room has 13 > 9 + 3 children.
   // (A loose tau1 keeps any bound tied to the largest child below 4 px.)
   DetectorParams p = params_for({Family(3)});
-  p.noise_fraction = 3.0 / a.tree.regions[room].area;
-  p.max_area_ratio = 50;
+  p.min_child_fraction = 3.0 / a.tree.regions[room].area;
+  p.max_ink_ratio = 50;
   DetectionStats none;
   EXPECT_TRUE(run(a, p, none).empty());
   EXPECT_EQ(none.topology, 0);
@@ -459,9 +459,9 @@ TEST(FindCandidates, NoiseChildrenAreIgnored) {
 
 TEST(FindCandidates, ChildrenTooSmallBesideTheLargestAreNoise) {
   // Eight 12 x 12 squares, one 30 x 30 and four 7 x 7 extras (49 px, above the 15 px bound
-  // from the white area): with noise_ratio = 14 the bound from the largest child is
+  // from the white area): with max_child_ratio = 14 the bound from the largest child is
   // 900 / 14 = 64.3 px, so the extras are noise and the room is a candidate; with
-  // noise_ratio = 100 (9 px) the extras count, making 13 children.
+  // max_child_ratio = 100 (9 px) the extras count, making 13 children.
   std::vector<cv::Rect> all = grid(12, 28, 12);
   all[8] = cv::Rect(62, 62, 30, 30);
   for (int i = 0; i < 4; ++i) all.emplace_back(6 + 16 * i, 4, 7, 7);
@@ -471,19 +471,19 @@ TEST(FindCandidates, ChildrenTooSmallBesideTheLargestAreNoise) {
   ASSERT_EQ(a.tree.regions[room].child_count, 13);
   ASSERT_GT(49, a.tree.regions[room].area / 500.0);
   DetectorParams p = params_for({Family(3)});
-  p.noise_ratio = 14;
+  p.max_child_ratio = 14;
   DetectionStats stats;
   const std::vector<Candidate> out = run(a, p, stats);
   ASSERT_EQ(out.size(), 1u);
   for (const Blob& b : out[0].blobs) EXPECT_GE(b.area, 144);
-  p.noise_ratio = 100;
+  p.max_child_ratio = 100;
   DetectionStats s2;
   EXPECT_TRUE(run(a, p, s2).empty());
   EXPECT_EQ(s2.topology, 0);
 }
 
 TEST(FindCandidates, ChildrenAtTheNoiseBoundCount) {
-  // Nine 12 x 12 squares and noise_ratio = 18, with no bound from the white area: the
+  // Nine 12 x 12 squares and max_child_ratio = 18, with no bound from the white area: the
   // bound is 144 / 18 = 8 px exactly. Four extra children of 8 px are children
   // (13 > 9 + 3: no candidate), four of 7 px are noise (a candidate).
   for (const auto& [w, h, kept] : {std::tuple{2, 4, true}, std::tuple{1, 7, false}}) {
@@ -492,8 +492,8 @@ TEST(FindCandidates, ChildrenAtTheNoiseBoundCount) {
     const Analysed a = analyse(boxed(100, 3, all));
     ASSERT_EQ(a.tree.regions[a.at(10, 20)].child_count, 13);
     DetectorParams p = params_for({Family(3)});
-    p.noise_fraction = 0;
-    p.noise_ratio = 18;
+    p.min_child_fraction = 0;
+    p.max_child_ratio = 18;
     DetectionStats stats;
     EXPECT_EQ(run(a, p, stats).size(), kept ? 0u : 1u) << w * h << " px";
     EXPECT_EQ(stats.topology, kept ? 0 : 1) << w * h << " px";
@@ -578,7 +578,7 @@ TEST(FindCandidates, AreaConstraintOnTheBlobsInk) {
     ASSERT_EQ(a.tree.regions[a.at(10, 10)].child_count, 9);
     for (double tau1 : {k.normalised - 0.02, k.normalised + 0.02}) {
       DetectorParams p = params_for({Family(3)});
-      p.max_area_ratio = tau1;
+      p.max_ink_ratio = tau1;
       DetectionStats stats;
       const std::vector<Candidate> out = run(a, p, stats);
       EXPECT_EQ(stats.topology, 1);
@@ -617,11 +617,11 @@ TEST(FindCandidates, AreaConstraintTakesOutPerspective) {
   DetectorParams p = params_for({Family(3)});
   DetectionStats stats;
   EXPECT_EQ(run(columns({5, 8, 12}), p, stats).size(), 1u);
-  p.max_area_ratio = 1.1;
+  p.max_ink_ratio = 1.1;
   EXPECT_EQ(run(columns({5, 8, 12}), p, stats).size(), 1u);
-  p.max_area_ratio = 3.7;
+  p.max_ink_ratio = 3.7;
   EXPECT_TRUE(run(columns({5, 12, 8}), p, stats).empty());
-  p.max_area_ratio = 3.75;
+  p.max_ink_ratio = 3.75;
   EXPECT_EQ(run(columns({5, 12, 8}), p, stats).size(), 1u);
 }
 

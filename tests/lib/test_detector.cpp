@@ -510,7 +510,7 @@ TEST(Detector, ParametersAreValidated) {
   invalid([](DetectorParams& p) { p.threshold_window = 1; });
   invalid([](DetectorParams& p) { p.threshold_offset = 300; });
   invalid([](DetectorParams& p) { p.max_second_looks = -1; });
-  invalid([](DetectorParams& p) { p.max_area_ratio = 0.5; });
+  invalid([](DetectorParams& p) { p.max_ink_ratio = 0.5; });
   invalid([](DetectorParams& p) { p.max_decode_error[3] = -1; });
   invalid([](DetectorParams& p) { p.tag_size = 0; });
   invalid([](DetectorParams& p) { p.camera = Camera::pinhole(-5, 5, 1, 1); });

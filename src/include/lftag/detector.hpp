@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // The LFTag detector: finds, decodes and localises markers in a grey image.
 //
-//   lftag::Detector detector;                       // 3x3 and 4x4, paper defaults
+//   lftag::Detector detector;                       // 3x3 and 4x4, the defaults below
 //   for (const lftag::Detection& d : detector.detect(lftag::ImageView(grey)))
 //     std::cout << d.family.name() << " " << d.id.to_decimal() << "\n";
 //
@@ -67,24 +67,25 @@ struct DetectorParams {
   int max_second_looks = 64;  // patches per frame at most, the work bound of a cluttered frame
 
   // -- Candidates: a white region with at least n^2 black children. Children smaller than
-  //    `noise_fraction` of the white region's area, or than the largest child over
-  //    `noise_ratio`, are noise; at most n^2 + max_extra_children children remain, of
+  //    `min_child_fraction` of the white region's area, or than the largest child over
+  //    `max_child_ratio`, are noise; at most n^2 + max_extra_children children remain, of
   //    which the n^2 largest are kept. The largest square is 16/9 of the smallest by
   //    design and up to about 14 times under the steepest perspective we decode (80
   //    degrees at 1.5 tag sizes from the camera).
-  double noise_fraction = 1.0 / 500;
-  double noise_ratio = 40;
+  double min_child_fraction = 1.0 / 500;
+  double max_child_ratio = 40;
   int max_extra_children = 3;
 
   // -- Vertex estimation: centroids of the inverted grey image over each black region
-  //    dilated by `dilation` pixels (L-infinity).
+  //    and the white pixels within `dilation` pixels of it (a Euclidean radius, where the
+  //    paper dilates by an L-infinity square; see measure_blob).
   int dilation = 1;  // delta (paper: 1)
   CentroidReference centroid_reference = CentroidReference::local_white;
 
   // -- Constraints.
   // tau1: largest / smallest blob ink (design ratio 16/9), once the perspective's
   // growth of area across the marker is taken out (a plane fitted to the cube roots).
-  double max_area_ratio = 5.0;
+  double max_ink_ratio = 5.0;
   // tau2, scale-free: reject near-collinear blobs whose centroid scatter has a smaller
   // to larger principal axis ratio (sqrt of the eigenvalue ratio) below this.
   double min_spread_ratio = 0.1;
