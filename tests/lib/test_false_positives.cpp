@@ -35,7 +35,8 @@ void check(Detector& detector, const cv::Mat& grey, const std::string& name, Cou
 }  // namespace
 
 TEST(FalsePositives, NoneOnOpenCvPhotosAndVideos) {
-  ASSERT_TRUE(std::filesystem::is_directory(kData)) << "install opencv-doc";
+  if (!std::filesystem::is_directory(kData))
+    GTEST_SKIP() << kData << " is missing: install the Debian package opencv-doc (scripts/test.sh does)";
   DetectorParams params;
   params.families = Family::all();
   Detector detector(params);

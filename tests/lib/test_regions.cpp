@@ -122,8 +122,9 @@ Labelled label(const cv::Mat1b& black, RegionLabeller* reuse = nullptr) {
             << "region " << r << " among its parent's children";
       }
     }
-    EXPECT_GE(g.child_count, 0);
-    EXPECT_LE(g.first_child + g.child_count, int(t.children.size()));
+    // Its children are a slice of the children array.
+    EXPECT_GE(g.first_child, 0) << "region " << r;
+    EXPECT_LE(g.first_child + g.child_count, int(t.children.size())) << "region " << r;
     for (int i = 0; i < g.child_count; ++i) EXPECT_EQ(t.regions[t.children_of(r)[i]].parent, r);
     child_total += g.child_count;
   }
