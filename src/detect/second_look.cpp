@@ -138,7 +138,8 @@ bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look,
   if (scale > 1) {
     cv::Mat enlarged = view(patch.enlarged_buffer), blurred = view(patch.blurred_buffer);
     cv::resize(native, enlarged, size, 0, 0, cv::INTER_CUBIC);
-    cv::GaussianBlur(enlarged, blurred, cv::Size(0, 0), 0.5 * scale);
+    // Isolated: the view's buffer holds older patches beyond its edges.
+    cv::GaussianBlur(enlarged, blurred, cv::Size(0, 0), 0.5 * scale, 0, cv::BORDER_REPLICATE | cv::BORDER_ISOLATED);
     cv::addWeighted(enlarged, 2.0, blurred, -1.0, 0, patch.grey);
   } else {
     native.copyTo(patch.grey);
