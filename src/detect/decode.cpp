@@ -69,6 +69,16 @@ cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
   return {q[0] / q[2], q[1] / q[2]};
 }
 
+// The smaller singular value of h's Jacobian at unit point u: pixels per unit along the
+// marker's most foreshortened direction.
+double smallest_scale(const cv::Matx33d& h, cv::Point2d u) {
+  const cv::Point2d dx = apply(h, u + cv::Point2d(0.5, 0)) - apply(h, u - cv::Point2d(0.5, 0));
+  const cv::Point2d dy = apply(h, u + cv::Point2d(0, 0.5)) - apply(h, u - cv::Point2d(0, 0.5));
+  cv::Matx21d values;
+  cv::SVD::compute(cv::Matx22d(dx.x, dy.x, dx.y, dy.y), values, cv::SVD::NO_UV);
+  return std::isfinite(values(1)) ? values(1) : 0.0;
+}
+
 // The local inverse of h at unit point u: pixels -> units.
 cv::Matx22d pixels_to_units(const cv::Matx33d& h, cv::Point2d u) {
   const cv::Point2d dx = apply(h, u + cv::Point2d(0.5, 0)) - apply(h, u - cv::Point2d(0.5, 0));
@@ -324,6 +334,13 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   };
   Decoding best = *std::min_element(tried.begin(), tried.end(), better);
 
+  // Below about half a pixel per unit the 1 u shifts are under half a pixel and blur into
+  // one another: a reading there can pass every check below and still be wrong (a 3x3
+  // at 0.42 px per unit did, once in the range sweep), so it is not made.
+  if (smallest_scale(best.homography, cv::Point2d(side / 2.0, side / 2.0)) < params.min_pixels_per_unit) {
+    best.verdict = Verdict::resolution;
+    return best;
+  }
   // tau3, and every digit clear of the midpoint between two positions.
   if (best.error > params.decode_threshold(f) || best.worst_cell > params.max_cell_residual) {
     best.verdict = Verdict::residual;

@@ -55,6 +55,7 @@ void DetectorParams::validate() const {
   if (!(max_cell_residual > 0 && max_cell_residual <= 1)) fail("the cell residual bound must be in (0, 1] units");
   if (!(max_ink_spread >= 1)) fail("the ink spread bound must be at least 1");
   if (!(min_decode_margin >= 1)) fail("the decoding margin must be at least 1");
+  if (!(min_pixels_per_unit >= 0 && min_pixels_per_unit < 100)) fail("the minimum pixels per unit must be in [0, 100)");
   for (double t : max_decode_error)
     if (!(t >= 0) || !std::isfinite(t)) fail("decode error thresholds (tau3) must be finite and not negative");
   if (!(tag_size > 0) || !std::isfinite(tag_size)) fail("the tag size must be positive");
@@ -134,7 +135,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
       }
       auto decoded = detail::decode(c, side, work, camera, p, stats, trace ? &trace->hypotheses.back() : nullptr);
       if (!decoded) continue;
-      passed[0] |= decoded->verdict != detail::Verdict::residual;
+      passed[0] |= decoded->verdict >= detail::Verdict::margin;
       passed[1] |= decoded->verdict == detail::Verdict::accepted;
       if (!best || int(decoded->verdict) > int(best->verdict)) best = decoded;
       if (decoded->verdict == detail::Verdict::accepted && decoded->ink_spread <= p.max_ink_spread) {
@@ -152,7 +153,11 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
       else if (!constraints.angle) stage = Stage::angle;
       else if (!constraints.collinearity) stage = Stage::collinearity;
       else if (!best) stage = Stage::decoding;
-      else if (!d) stage = passed[1] ? Stage::ink : passed[0] ? Stage::margin : Stage::decoding;
+      else if (!d)
+        stage = passed[1]                                      ? Stage::ink
+                : passed[0]                                    ? Stage::margin
+                : best->verdict == detail::Verdict::resolution ? Stage::resolution
+                                                               : Stage::decoding;
       CandidateVerdict v = verdict_of(c, second_look, stage);
       if (best) v.reading = best->id, v.decode_error = best->error, v.worst_cell = best->worst_cell;
       trace->verdicts.push_back(std::move(v));
@@ -190,6 +195,7 @@ const char* stage_name(Stage stage) {
     case Stage::geometry: return "geometry";
     case Stage::angle: return "angle";
     case Stage::collinearity: return "collinearity";
+    case Stage::resolution: return "resolution";
     case Stage::decoding: return "decoding";
     case Stage::margin: return "margin";
     case Stage::ink: return "ink";

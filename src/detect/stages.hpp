@@ -203,9 +203,10 @@ std::vector<KeyPoints> find_keypoints(const Candidate& c, const DetectorParams& 
 double signed_angle(cv::Point2d a, cv::Point2d b);
 
 // ---------------------------------------------------------------- decode.cpp
-// How a decoding ended: rejected by tau3 or the cell residual bound, rejected because
-// another id fits within the margin, or accepted (the ink check comes after).
-enum class Verdict { residual, margin, accepted };
+// How a decoding ended: rejected because the marker is too small to read, by tau3 or the
+// cell residual bound, because another id fits within the margin, or accepted (the ink
+// check comes after).
+enum class Verdict { resolution, residual, margin, accepted };
 
 struct Decoding {
   Verdict verdict = Verdict::accepted;

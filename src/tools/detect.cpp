@@ -93,7 +93,7 @@ void add_detect_command(CLI::App& app, int& status) {
   cmd->add_flag("--stats", opt->stats, "Add the candidate funnel and per-stage times to each object");
   cmd->add_flag("--why", opt->why,
                 "Add \"candidates\": every topological candidate with the stage that stopped it (area, "
-                "geometry, angle, collinearity, decoding, margin, ink, pose, duplicate) or \"detected\"");
+                "geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or \"detected\"");
   cmd->add_option("--debug-dir", opt->debug_dir,
                   "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
   cmd->callback([opt, &status] {

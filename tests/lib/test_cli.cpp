@@ -176,7 +176,7 @@ TEST(Cli, DetectWhyNamesTheStageThatStoppedEachCandidate) {
   EXPECT_GE(o["stats"]["funnel"]["second_looks"].get<int>(), 1);
   EXPECT_EQ(o["stats"]["funnel"]["second_look_found"], 1);
   ASSERT_FALSE(o["candidates"].empty());
-  const std::set<std::string> known = {"area",   "geometry", "angle", "collinearity", "decoding",
+  const std::set<std::string> known = {"area",   "geometry", "angle", "collinearity", "resolution", "decoding",
                                        "margin", "ink",      "pose",  "duplicate",    "detected"};
   int detected = 0;
   for (const auto& c : o["candidates"]) {

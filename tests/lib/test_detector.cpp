@@ -500,6 +500,27 @@ TEST(Detector, StatsCountTheFunnelAndTraceRecordsTheStages) {
   EXPECT_DOUBLE_EQ(sum.total_ms(), 2 * stats.total_ms());
 }
 
+TEST(Detector, MarkersBelowTheReadableResolutionAreNotRead) {
+  // A 3x3 marker 80 px across (3.3 px per unit) is read by default and refused, with the
+  // stage named in the trace, when 4 px per unit are asked for.
+  SceneParams p;
+  p.camera = paper_camera();
+  SceneMarker m;
+  m.id = 4242;
+  m.tvec = {0.01, 0.02, 4.0};
+  const RenderedScene scene = render_scene(p, {m});
+  DetectorParams params;
+  params.families = {Family(3)};
+  EXPECT_EQ(Detector(params).detect(ImageView(scene.image)).size(), 1u);
+  params.min_pixels_per_unit = 4;
+  Detector strict(params);
+  DetectionTrace trace;
+  EXPECT_TRUE(strict.detect(ImageView(scene.image), nullptr, &trace).empty());
+  ASSERT_FALSE(trace.verdicts.empty());
+  for (const CandidateVerdict& v : trace.verdicts) EXPECT_EQ(v.stage, Stage::resolution);  // also its second look
+  EXPECT_STREQ(stage_name(Stage::resolution), "resolution");
+}
+
 TEST(Detector, ParametersAreValidated) {
   auto invalid = [](auto change) {
     DetectorParams p;
@@ -510,6 +531,7 @@ TEST(Detector, ParametersAreValidated) {
   invalid([](DetectorParams& p) { p.threshold_window = 1; });
   invalid([](DetectorParams& p) { p.threshold_offset = 300; });
   invalid([](DetectorParams& p) { p.max_second_looks = -1; });
+  invalid([](DetectorParams& p) { p.min_pixels_per_unit = -1; });
   invalid([](DetectorParams& p) { p.max_ink_ratio = 0.5; });
   invalid([](DetectorParams& p) { p.max_decode_error[3] = -1; });
   invalid([](DetectorParams& p) { p.tag_size = 0; });

@@ -97,6 +97,10 @@ struct DetectorParams {
   // bound too: every data centroid within this many units of its decoded position (the
   // four positions are 1 u apart, so 0.5 would be a coin toss).
   double max_cell_residual = 0.35;
+  // Markers smaller than this many pixels per unit along their most foreshortened
+  // direction are not read (a 3x3 under 10.3 px across face-on): at 0.42 a wrong id was
+  // read in the range sweep.
+  double min_pixels_per_unit = 0.43;
   // Reject a reading when a hypothesis giving another id has a decoding error within this
   // factor of the best one's: at the limit of resolution two ids can fit nearly as well.
   double min_decode_margin = 2.0;
@@ -173,6 +177,7 @@ enum class Stage {
   geometry,      // the geometry constraint, on every side of the hull
   angle,         // the angle constraint
   collinearity,  // the collinearity constraint (tau2)
+  resolution,    // too few pixels per unit to read (min_pixels_per_unit)
   decoding,      // no reading within tau3 and the cell residual bound
   margin,        // another id fitted within the decoding margin
   ink,           // the squares' ink did not match the design on any side
