@@ -94,7 +94,8 @@ def fp_table(results):
 
 
 def funnel_table(results):
-    stages = ["regions", "topology", "area", "geometry", "angle", "collinearity", "residual", "unambiguous", "decoded"]
+    stages = ["regions", "topology", "area", "geometry", "angle", "collinearity", "residual", "unambiguous", "decoded",
+              "second_looks", "second_look_found"]
     sums = defaultdict(float)
     for r in read(results, "fp_counters.csv"):
         sums[(r["system"], r["counter"])] += float(r["value"])

@@ -403,7 +403,7 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
   g_object_class_install_property (gobject_class, PROP_SECOND_LOOK,
       g_param_spec_boolean ("second-look", "Second look",
           "Look again, enlarged and with a local threshold, at small isolated "
-          "clusters where no marker was found: far, small and defocused markers",
+          "clusters where no marker was found: far, small and motion-blurred markers",
           defaults.second_look, playing));
   g_object_class_install_property (gobject_class, PROP_MAX_AREA_RATIO,
       g_param_spec_double ("max-area-ratio", "Maximum area ratio",

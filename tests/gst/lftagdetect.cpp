@@ -747,6 +747,12 @@ GST_START_TEST(test_properties) {
   fail_unless_equals_string(families, "3x3,4x4");
   fail_unless(tag_size == 0.1 && overlay == 0 && message && distortion == nullptr);
   g_free(families);
+  gboolean second_look = FALSE;
+  g_object_get(e, "second-look", &second_look, nullptr);
+  fail_unless(second_look, "the second look is on by default");
+  g_object_set(e, "second-look", FALSE, nullptr);
+  g_object_get(e, "second-look", &second_look, nullptr);
+  fail_if(second_look);
 
   g_object_set(e, "families", "2x2,8x8", "distortion", "-0.1,0.02,0,0,0.001", nullptr);
   // Refused with a warning, changing nothing.
