@@ -118,7 +118,7 @@ def speed_table(results):
 
 def stage_table(results):
     stages = ["threshold_ms", "regions_ms", "candidates_ms", "keypoints_ms", "hypotheses_ms", "decode_ms", "pose_ms",
-              "total_ms"]
+              "second_look_ms", "total_ms"]
     values = defaultdict(dict)
     for r in read(results, "speed_counters.csv"):
         if r["set"] == "scenes" and r["system"] in ("lftag-3x3", "lftag-4x4"):

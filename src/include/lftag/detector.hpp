@@ -148,7 +148,7 @@ struct Detection {
 // frame or (with +=) many: the paper's false-positive funnel and timing tables.
 struct DetectionStats {
   std::int64_t frames = 0;
-  std::int64_t regions = 0;            // regions in the tree
+  std::int64_t regions = 0;            // regions labelled (the frame's and the second looks')
   std::int64_t topology = 0;           // white regions with n^2..n^2+extra black children
   std::int64_t area = 0;               // passed the area constraint
   std::int64_t geometry = 0;           // passed the geometry constraint
