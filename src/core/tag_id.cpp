@@ -96,7 +96,8 @@ std::vector<TagId> parse_id_list(std::string_view text, std::size_t max_ids) {
       if (!lo.fits_u64() || !hi.fits_u64() || hi < lo)
         throw std::invalid_argument("id range '" + std::string(item) + "' must run upwards, below 2^64");
       if (hi.low() - lo.low() >= max_ids) too_many();
-      for (std::uint64_t v = lo.low(); v <= hi.low(); ++v) ids.emplace_back(v);
+      // Counted, not compared: a range ending at 2^64 - 1 must not wrap round to 0.
+      for (std::uint64_t k = 0; k <= hi.low() - lo.low(); ++k) ids.emplace_back(lo.low() + k);
     }
     if (ids.size() > max_ids) too_many();
     start = comma + 1;

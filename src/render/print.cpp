@@ -47,12 +47,33 @@ void check(cairo_status_t status, const std::string& path) {
     throw std::runtime_error("cannot write '" + path + "': " + cairo_status_to_string(status));
 }
 
-// Fails early (before cairo creates anything) when the file cannot be created.
-void require_writable(const std::string& path) {
-  std::FILE* f = std::fopen(path.c_str(), "wb");
-  if (!f) throw std::runtime_error("cannot write '" + path + "': " + std::strerror(errno));
-  std::fclose(f);
-}
+// A file written under a temporary name beside its destination and renamed over it only
+// when complete: a failed write leaves an existing file as it was, and no half file.
+// Creating the temporary file fails early, before cairo makes anything, when the
+// destination's folder cannot be written.
+class PartFile {
+ public:
+  explicit PartFile(std::string path) : path_(std::move(path)), part_(path_ + ".part") {
+    std::FILE* f = std::fopen(part_.c_str(), "wb");
+    if (!f) throw std::runtime_error("cannot write '" + path_ + "': " + std::strerror(errno));
+    std::fclose(f);
+  }
+  PartFile(const PartFile&) = delete;
+  PartFile& operator=(const PartFile&) = delete;
+  ~PartFile() {
+    if (!done_) std::remove(part_.c_str());
+  }
+  const std::string& part() const { return part_; }
+  void commit() {
+    if (std::rename(part_.c_str(), path_.c_str()) != 0)
+      throw std::runtime_error("cannot write '" + path_ + "': " + std::strerror(errno));
+    done_ = true;
+  }
+
+ private:
+  std::string path_, part_;
+  bool done_ = false;
+};
 
 std::string size_text(double metres) {
   std::ostringstream s;
@@ -132,7 +153,9 @@ Surface vector_surface(Format f, const std::string& path, double w, double h) {
   return s;
 }
 
-void write_png_marker(const std::string& path, const Family& family, TagId id, const PrintOptions& o) {
+// Writes to `file`; messages name `path`.
+void write_png_marker(const std::string& file, const std::string& path, const Family& family, TagId id,
+                      const PrintOptions& o) {
   const double px_per_unit = o.size_m / 0.0254 * o.dpi / family.side();
   const cv::Mat1b marker = rasterize_marker(family, id, px_per_unit, o.margin_units);
   const double font_px = caption_font_pt(o.size_m * kPointsPerMetre) * o.dpi / 72.0;
@@ -154,7 +177,7 @@ void write_png_marker(const std::string& path, const Family& family, TagId id, c
     Context cr(cairo_create(surface.get()));
     draw_caption(cr.get(), caption_text(family, id, o.size_m), marker.cols / 2.0, marker.rows + 1.2 * font_px, font_px);
   }
-  check(cairo_surface_write_to_png(surface.get(), path.c_str()), path);
+  check(cairo_surface_write_to_png(surface.get(), file.c_str()), path);
 }
 
 }  // namespace
@@ -163,16 +186,20 @@ void write_marker(const std::string& path, const Family& family, TagId id, const
   family.require(id);
   validate(options);
   const Format format = format_of(path);
-  require_writable(path);
-  if (format == Format::png) return write_png_marker(path, family, id, options);
-  const Layout l = layout(family, options);
-  Surface surface = vector_surface(format, path, l.width, l.height);
-  Context cr(cairo_create(surface.get()));
-  draw_boxed(cr.get(), family, id, options, l);
-  cairo_show_page(cr.get());
-  cr.reset();
-  cairo_surface_finish(surface.get());
-  check(cairo_surface_status(surface.get()), path);
+  PartFile out(path);
+  if (format == Format::png) {
+    write_png_marker(out.part(), path, family, id, options);
+  } else {
+    const Layout l = layout(family, options);
+    Surface surface = vector_surface(format, out.part(), l.width, l.height);
+    Context cr(cairo_create(surface.get()));
+    draw_boxed(cr.get(), family, id, options, l);
+    cairo_show_page(cr.get());
+    cr.reset();
+    cairo_surface_finish(surface.get());
+    check(cairo_surface_status(surface.get()), path);
+  }
+  out.commit();
 }
 
 Paper parse_paper(const std::string& name) {
@@ -200,7 +227,7 @@ int write_sheet(const std::string& path, const Family& family, const std::vector
   if (pages > 1 && format != Format::pdf)
     throw std::invalid_argument(std::to_string(ids.size()) + " markers need " + std::to_string(pages) +
                                 " pages: write a .pdf, or choose fewer ids or a smaller size");
-  require_writable(path);
+  PartFile out(path);
   // Centre the grid actually used on the page.
   const int used_cols = std::min<int>(cols, int(ids.size()));
   const int used_rows = std::min<int>(rows, int((ids.size() + used_cols - 1) / used_cols));
@@ -211,7 +238,7 @@ int write_sheet(const std::string& path, const Family& family, const std::vector
   Surface surface = format == Format::png
                         ? Surface(cairo_image_surface_create(CAIRO_FORMAT_RGB24, int(std::ceil(page_w * px_per_pt - 1e-6)),
                                                              int(std::ceil(page_h * px_per_pt - 1e-6))))
-                        : vector_surface(format, path, page_w, page_h);
+                        : vector_surface(format, out.part(), page_w, page_h);
   check(cairo_surface_status(surface.get()), path);
   Context cr(cairo_create(surface.get()));
   if (format == Format::png) cairo_scale(cr.get(), px_per_pt, px_per_pt);
@@ -228,13 +255,14 @@ int write_sheet(const std::string& path, const Family& family, const std::vector
     cairo_restore(cr.get());
   }
   if (format == Format::png) {
-    check(cairo_surface_write_to_png(surface.get(), path.c_str()), path);
+    check(cairo_surface_write_to_png(surface.get(), out.part().c_str()), path);
   } else {
     cairo_show_page(cr.get());
     cr.reset();
     cairo_surface_finish(surface.get());
     check(cairo_surface_status(surface.get()), path);
   }
+  out.commit();
   return pages;
 }
 

@@ -1,4 +1,6 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
+#include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 
@@ -90,4 +92,22 @@ TEST(Print, ErrorsAreClear) {
   o.size_m = 1.0;
   EXPECT_THROW(write_sheet(testing::TempDir() + "/s.pdf", Family(3), {1}, o, Paper::a4), std::invalid_argument);
   EXPECT_THROW(parse_paper("a5"), std::invalid_argument);
+}
+
+TEST(Print, AFailedWriteLeavesAnExistingFileAlone) {
+  // A4 at 20,000 dpi is wider than cairo's largest image: the write fails after the file
+  // was opened. The file that was there keeps its bytes, and no partial file stays.
+  const std::string path = testing::TempDir() + "/keep.png";
+  std::ofstream(path) << "keep me";
+  PrintOptions o;
+  o.dpi = 20000;
+  EXPECT_THROW(write_sheet(path, Family(3), {1}, o, Paper::a4), std::runtime_error);
+  EXPECT_EQ(slurp(path), "keep me");
+  EXPECT_FALSE(std::ifstream(path + ".part").good());
+  // A write that succeeds replaces it whole.
+  o.dpi = 50;
+  EXPECT_EQ(write_sheet(path, Family(3), {1}, o, Paper::a4), 1);
+  EXPECT_EQ(cv::imread(path).cols, int(std::ceil(0.210 / 0.0254 * 50 - 1e-6)));
+  EXPECT_FALSE(std::ifstream(path + ".part").good());
+  std::remove(path.c_str());
 }

@@ -65,6 +65,11 @@ TEST(TagId, ParsesLists) {
   EXPECT_EQ(ids[1], TagId(16));
   EXPECT_EQ(ids[4], TagId(5));
   EXPECT_THROW(lftag::parse_id_list("5-3"), std::invalid_argument);
+  // Ranges at the top of 64 bits end (they used to wrap round to 0 and never stop).
+  const auto top = lftag::parse_id_list("18446744073709551614-18446744073709551615");
+  ASSERT_EQ(top.size(), 2u);
+  EXPECT_EQ(top[1].to_decimal(), "18446744073709551615");
+  EXPECT_EQ(lftag::parse_id_list("18446744073709551615-18446744073709551615").size(), 1u);
   EXPECT_THROW(lftag::parse_id_list("1,,2"), std::invalid_argument);
   EXPECT_THROW(lftag::parse_id_list("0-99", 10), std::invalid_argument);
   EXPECT_THROW(lftag::parse_id_list("1,2,3", 2), std::invalid_argument);
