@@ -3,9 +3,25 @@
 // runs, stores its exit status in `status`.
 #pragma once
 
+#include <cmath>
+#include <string>
+
 #include <CLI/CLI.hpp>
 
 namespace lftag::tools {
+
+// An option check: a finite number from lo to hi ("nan", "inf" and overflowing values fail,
+// which CLI11's own PositiveNumber lets through for NaN).
+inline CLI::Validator finite_in(double lo, double hi) {
+  return CLI::Validator(
+      [lo, hi](std::string& text) -> std::string {
+        double v = 0;
+        if (!CLI::detail::lexical_cast(text, v) || !std::isfinite(v) || v < lo || v > hi)
+          return "must be a finite number from " + CLI::detail::to_string(lo) + " to " + CLI::detail::to_string(hi);
+        return {};
+      },
+      "NUMBER in [" + CLI::detail::to_string(lo) + ", " + CLI::detail::to_string(hi) + "]");
+}
 
 void add_generate_command(CLI::App& app, int& status);
 void add_render_command(CLI::App& app, int& status);

@@ -76,16 +76,16 @@ void add_detect_command(CLI::App& app, int& status) {
   CLI::App* cmd = app.add_subcommand("detect", "Detect markers in images; prints one JSON object per image (JSON Lines).");
   cmd->add_option("images", opt->images, "Image files (PNG, JPEG and every format OpenCV reads)")->required();
   cmd->add_option("--family", opt->families, "Families to detect, comma-separated (default 3x3,4x4)");
-  cmd->add_option("--fx", opt->fx, "Focal length in pixels (x)");
-  cmd->add_option("--fy", opt->fy, "Focal length in pixels (y; default fx)");
-  cmd->add_option("--cx", opt->cx, "Principal point x (default: image centre)");
-  cmd->add_option("--cy", opt->cy, "Principal point y (default: image centre)");
+  cmd->add_option("--fx", opt->fx, "Focal length in pixels (x)")->check(finite_in(1e-3, 1e7));
+  cmd->add_option("--fy", opt->fy, "Focal length in pixels (y; default fx)")->check(finite_in(1e-3, 1e7));
+  cmd->add_option("--cx", opt->cx, "Principal point x (default: image centre)")->check(finite_in(-1e7, 1e7));
+  cmd->add_option("--cy", opt->cy, "Principal point y (default: image centre)")->check(finite_in(-1e7, 1e7));
   cmd->add_option("--calibration", opt->calibration,
                   "OpenCV calibration file (YAML/XML/JSON: camera_matrix + distortion_coefficients, or "
                   "cameraMatrix + distCoeffs). Without a camera, poses assume fx = image width and are "
                   "marked \"calibrated\": false");
   cmd->add_option("--tag-size", opt->tag_size, "Outer edge of the black border in metres (default 0.1)")
-      ->check(CLI::PositiveNumber);
+      ->check(finite_in(1e-6, 1e3));
   cmd->add_option("--threshold-window", opt->window, "Side of the mean window for binarisation (default 16)")
       ->check(CLI::Range(2, 1024));
   cmd->add_option("--threshold-offset", opt->offset, "Grey levels below the mean for black (default 4)")

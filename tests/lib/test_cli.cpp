@@ -202,6 +202,14 @@ TEST(Cli, DetectRejectsBadConfiguration) {
   r = run("detect --threshold-window 1 x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("--threshold-window"), std::string::npos) << r.output;
+  // Numbers that are not finite or not representable are option errors (exit 2) naming
+  // the option, never ignored or left to fail per image.
+  for (const char* bad : {"--fx nan", "--fx -5", "--fx 1e-300", "--fy inf", "--cx nan", "--tag-size 1e308",
+                          "--tag-size 0"}) {
+    r = run(std::string("detect --fx 300 ") + bad + " x.png");
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find(std::string(bad).substr(0, std::string(bad).find(' '))), std::string::npos) << r.output;
+  }
   r = run("detect --cx 100 x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("need --fx"), std::string::npos) << r.output;
