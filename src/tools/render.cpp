@@ -72,32 +72,33 @@ void add_render_command(CLI::App& app, int& status) {
       "render", "Render a synthetic camera frame of markers (PNG) with its ground truth (JSON).");
   cmd->add_option("--width", opt->width, "Frame width in pixels (default 640)")->check(CLI::PositiveNumber);
   cmd->add_option("--height", opt->height, "Frame height in pixels (default 480)")->check(CLI::PositiveNumber);
-  cmd->add_option("--fx", opt->fx, "Focal length in pixels along x (default 320)");
-  cmd->add_option("--fy", opt->fy, "Focal length in pixels along y (default 320)");
-  cmd->add_option("--cx", opt->cx, "Principal point x (default: frame centre)");
-  cmd->add_option("--cy", opt->cy, "Principal point y (default: frame centre)");
+  cmd->add_option("--fx", opt->fx, "Focal length in pixels along x (default 320)")->check(finite_in(1e-3, 1e7));
+  cmd->add_option("--fy", opt->fy, "Focal length in pixels along y (default 320)")->check(finite_in(1e-3, 1e7));
+  cmd->add_option("--cx", opt->cx, "Principal point x (default: frame centre)")->check(finite_in(-1e7, 1e7));
+  cmd->add_option("--cy", opt->cy, "Principal point y (default: frame centre)")->check(finite_in(-1e7, 1e7));
   cmd->add_option("--distortion", opt->distortion, "Distortion k1,k2,p1,p2[,k3]")->delimiter(',');
   cmd->add_option("--calibration", opt->calibration,
                   "OpenCV calibration file (YAML/XML); replaces the camera options");
   cmd->add_option("--family", opt->family, "Family of the single marker (default 3x3)");
   cmd->add_option("--id", opt->id, "Id of the single marker, decimal or 0x-hexadecimal (default 0)");
   cmd->add_option("--tag-size", opt->tag_size, "Outer edge of the black border in metres (default 1)")
-      ->check(CLI::PositiveNumber);
+      ->check(finite_in(1e-6, 1e3));
   cmd->add_option("--distance", opt->distance, "Distance of the marker centre along the optical axis, m (default 5)")
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--x", opt->x, "Sideways offset of the marker centre, m (default 0)");
-  cmd->add_option("--y", opt->y, "Downward offset of the marker centre, m (default 0)");
-  cmd->add_option("--roll", opt->roll, "In-plane rotation, degrees (default 0)");
-  cmd->add_option("--tilt", opt->tilt, "Rotation about the camera's x axis, degrees (default 0)");
-  cmd->add_option("--pan", opt->pan, "Rotation about the camera's y axis, degrees (default 0)");
+      ->check(finite_in(1e-6, 1e6));
+  cmd->add_option("--x", opt->x, "Sideways offset of the marker centre, m (default 0)")->check(finite_in(-1e6, 1e6));
+  cmd->add_option("--y", opt->y, "Downward offset of the marker centre, m (default 0)")->check(finite_in(-1e6, 1e6));
+  cmd->add_option("--roll", opt->roll, "In-plane rotation, degrees (default 0)")->check(finite_in(-1e4, 1e4));
+  cmd->add_option("--tilt", opt->tilt, "Rotation about the camera's x axis, degrees (default 0)")->check(finite_in(-1e4, 1e4));
+  cmd->add_option("--pan", opt->pan, "Rotation about the camera's y axis, degrees (default 0)")->check(finite_in(-1e4, 1e4));
   cmd->add_option("--margin", opt->margin, "White margin around the marker, whole units (default 2)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--scene", opt->scene,
                   "JSON file of several markers: {\"markers\": [{\"family\", \"id\", \"tag_size\", \"tvec\", "
                   "\"rvec\" or \"roll\"/\"tilt\"/\"pan\"}]}; replaces the single-marker options");
-  cmd->add_option("--blur", opt->blur, "Linear motion blur length in pixels (default 0)")->check(CLI::NonNegativeNumber);
-  cmd->add_option("--blur-angle", opt->blur_angle, "Motion blur direction, degrees: 0 vertical, 90 horizontal");
-  cmd->add_option("--noise", opt->noise, "Gaussian noise sigma in grey levels (default 0)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--blur", opt->blur, "Linear motion blur length in pixels (default 0)")->check(finite_in(0, 1e4));
+  cmd->add_option("--blur-angle", opt->blur_angle, "Motion blur direction, degrees: 0 vertical, 90 horizontal")
+      ->check(finite_in(-1e4, 1e4));
+  cmd->add_option("--noise", opt->noise, "Gaussian noise sigma in grey levels (default 0)")->check(finite_in(0, 1e4));
   cmd->add_option("--seed", opt->seed, "Noise seed (default 1)");
   cmd->add_option("--background", opt->background, "Flat background albedo 0..1 (default 0.5)")
       ->check(CLI::Range(0.0, 1.0));

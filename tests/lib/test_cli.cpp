@@ -82,6 +82,19 @@ TEST(Cli, RenderWritesImageAndTruth) {
   EXPECT_TRUE(m["fully_visible"].get<bool>());
 }
 
+TEST(Cli, RenderRejectsNumbersItCannotUse) {
+  // NaN, infinities and denormal focal lengths once crashed the renderer (NaN coordinates
+  // passed its range checks): now they are option errors naming the option.
+  for (const char* bad : {"--fx 1e-300", "--fx nan", "--fy inf", "--distance inf", "--tag-size 1e308", "--noise nan",
+                          "--roll nan", "--x 1e300"}) {
+    const CliResult r = run(std::string("render ") + bad + " --output " + kTmp + "/bad.png");
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find(std::string(bad).substr(0, std::string(bad).find(' '))), std::string::npos) << r.output;
+  }
+  // The extremes of the ranges render.
+  EXPECT_EQ(run("render --fx 0.001 --fy 0.001 --output " + kTmp + "/tiny.png").status, 0);
+}
+
 TEST(Cli, RenderRejectsBadInput) {
   CliResult r = run("render --family 3x3 --id 99999 --output " + kTmp + "/x.png");
   EXPECT_NE(r.status, 0);
