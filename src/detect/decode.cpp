@@ -69,21 +69,22 @@ cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
   return {q[0] / q[2], q[1] / q[2]};
 }
 
-// The smaller singular value of h's Jacobian at unit point u: pixels per unit along the
-// marker's most foreshortened direction.
-double smallest_scale(const cv::Matx33d& h, cv::Point2d u) {
+// The Jacobian of h at unit point u (central differences): units -> pixels.
+cv::Matx22d units_to_pixels(const cv::Matx33d& h, cv::Point2d u) {
   const cv::Point2d dx = apply(h, u + cv::Point2d(0.5, 0)) - apply(h, u - cv::Point2d(0.5, 0));
   const cv::Point2d dy = apply(h, u + cv::Point2d(0, 0.5)) - apply(h, u - cv::Point2d(0, 0.5));
-  cv::Matx21d values;
-  cv::SVD::compute(cv::Matx22d(dx.x, dy.x, dx.y, dy.y), values, cv::SVD::NO_UV);
-  return std::isfinite(values(1)) ? values(1) : 0.0;
+  return cv::Matx22d(dx.x, dy.x, dx.y, dy.y);
 }
 
 // The local inverse of h at unit point u: pixels -> units.
-cv::Matx22d pixels_to_units(const cv::Matx33d& h, cv::Point2d u) {
-  const cv::Point2d dx = apply(h, u + cv::Point2d(0.5, 0)) - apply(h, u - cv::Point2d(0.5, 0));
-  const cv::Point2d dy = apply(h, u + cv::Point2d(0, 0.5)) - apply(h, u - cv::Point2d(0, 0.5));
-  return cv::Matx22d(dx.x, dy.x, dx.y, dy.y).inv();
+cv::Matx22d pixels_to_units(const cv::Matx33d& h, cv::Point2d u) { return units_to_pixels(h, u).inv(); }
+
+// Pixels per unit along the marker's most foreshortened direction at unit point u: the
+// smaller singular value of h's Jacobian there.
+double smallest_scale(const cv::Matx33d& h, cv::Point2d u) {
+  cv::Matx21d values;
+  cv::SVD::compute(units_to_pixels(h, u), values, cv::SVD::NO_UV);
+  return std::isfinite(values(1)) ? values(1) : 0.0;
 }
 
 // The 3x3 Sobel gradient at pixel (x, y), edges replicated.

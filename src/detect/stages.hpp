@@ -49,9 +49,6 @@ struct BinaryImage {
 // `offset`. `mean` is scratch space kept between frames.
 void threshold_mean(const ImageView& image, int window, int offset, cv::Mat& mean, BinaryImage& out);
 
-// Black where a pixel is darker than `level`.
-void threshold_level(const ImageView& image, int level, BinaryImage& out);
-
 // ---------------------------------------------------------------- regions.cpp
 struct Region {
   bool black = false;

@@ -45,16 +45,4 @@ void threshold_mean(const ImageView& image, int window, int offset, cv::Mat& mea
   }
 }
 
-void threshold_level(const ImageView& image, int level, BinaryImage& out) {
-  const int w = image.width, h = image.height;
-  out.width = w, out.height = h, out.words_per_row = (w + 63) / 64;
-  out.bits.assign(std::size_t(out.words_per_row) * h, 0);
-  for (int y = 0; y < h; ++y) {
-    const std::uint8_t* g = image.data + y * image.stride;
-    std::uint64_t* bits = out.bits.data() + std::size_t(y) * out.words_per_row;
-    for (int x = 0; x < w; ++x)
-      if (g[x] < level) bits[x >> 6] |= std::uint64_t{1} << (x & 63);
-  }
-}
-
 }  // namespace lftag::detail
