@@ -28,7 +28,7 @@ struct PlaneMap {
   bool grid(double qx, double qy, double& gx, double& gy) const {
     const cv::Matx33d& g = image_to_plane;
     const double w = g(2, 0) * qx + g(2, 1) * qy + g(2, 2);
-    if (w <= 0) return false;
+    if (!(w > 0)) return false;
     gx = (g(0, 0) * qx + g(0, 1) * qy + g(0, 2)) / w;
     gy = (g(1, 0) * qx + g(1, 1) * qy + g(1, 2)) / w;
     return true;
@@ -36,11 +36,12 @@ struct PlaneMap {
 
   int code(double qx, double qy) const {
     double gx, gy;
+    // Written so that NaN (a ray of a degenerate camera) falls outside, never into a cell.
     if (!grid(qx, qy, gx, gy)) return kBehind;
-    if (gx < 0) return kLeft;
-    if (gx >= cols) return kRight;
-    if (gy < 0) return kAbove;
-    if (gy >= rows) return kBelow;
+    if (!(gx >= 0)) return kLeft;
+    if (!(gx < cols)) return kRight;
+    if (!(gy >= 0)) return kAbove;
+    if (!(gy < rows)) return kBelow;
     return int(gy) * cols + int(gx);
   }
 };
@@ -127,7 +128,7 @@ void draw_target(const SceneTarget& t, const cv::Mat2f& rays, int supersample, c
           const float fx = (sx + 0.5f) / ss;
           double gx, gy;
           if (!map.grid(lx + (rx - lx) * fx, ly + (ry - ly) * fx, gx, gy)) continue;
-          if (gx < 0 || gy < 0 || gx >= map.cols || gy >= map.rows) continue;
+          if (!(gx >= 0 && gy >= 0 && gx < map.cols && gy < map.rows)) continue;  // NaN misses too
           sum += t.albedo(int(gy), int(gx));
           ++hits;
         }

@@ -175,3 +175,21 @@ TEST(Scene, RejectsBadParameters) {
   m.margin_units = 1.5;
   EXPECT_THROW(to_target(m), std::invalid_argument);
 }
+
+TEST(Scene, DegenerateCamerasNeverDrawOutsideTheMarker) {
+  // Focal lengths so small that the rays overflow to infinity, and grid coordinates become
+  // NaN: the renderer refuses the camera or draws, but never reads outside the albedo
+  // (this crashed with fx = 1e-100). Under the sanitizer build an out-of-bounds read fails here.
+  for (double fx : {1e-100, 1e-300, 1e-30}) {
+    SceneParams p;
+    p.camera = Camera::pinhole(fx, fx, 31.5, 23.5, 64, 48);
+    SceneMarker m;
+    m.tvec = {0, 0, 1};
+    try {
+      const cv::Mat1b image = SceneRenderer(p).render({to_target(m)});
+      EXPECT_EQ(image.size(), cv::Size(64, 48)) << fx;
+    } catch (const std::invalid_argument&) {
+      SUCCEED() << "fx = " << fx << " refused";
+    }
+  }
+}
