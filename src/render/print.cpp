@@ -89,10 +89,24 @@ std::string caption_text(const Family& family, TagId id, double size_m) {
 
 double caption_font_pt(double marker_pt) { return std::clamp(marker_pt * 0.045, 5.0, 14.0); }
 
+// Bounds a printer or a file can hold; past them the layout's integer sizes would overflow.
+constexpr double kMinSizeM = 1e-4, kMaxSizeM = 100, kMaxMarginUnits = 100, kMinDpi = 1, kMaxDpi = 10000;
+constexpr double kMaxPngSide = 32767;  // cairo's largest image surface
+
 void validate(const PrintOptions& o) {
-  if (!(o.size_m > 0) || !std::isfinite(o.size_m)) throw std::invalid_argument("the marker size must be positive");
-  if (!(o.margin_units >= 0)) throw std::invalid_argument("the margin must not be negative");
-  if (!(o.dpi > 0)) throw std::invalid_argument("the resolution (dpi) must be positive");
+  if (!(o.size_m >= kMinSizeM && o.size_m <= kMaxSizeM))
+    throw std::invalid_argument("the marker size must be from 0.1 mm to 100 m");
+  if (!(o.margin_units >= 0 && o.margin_units <= kMaxMarginUnits))
+    throw std::invalid_argument("the margin must be from 0 to 100 marker units");
+  if (!(o.dpi >= kMinDpi && o.dpi <= kMaxDpi))
+    throw std::invalid_argument("the resolution must be from 1 to 10000 dpi");
+}
+
+// Refuses a PNG whose side would pass cairo's limit, before anything is allocated.
+void check_png_side(double side_px) {
+  if (!(side_px <= kMaxPngSide))
+    throw std::invalid_argument("the PNG would be " + std::to_string(std::llround(side_px)) +
+                                " pixels a side, more than 32767: lower --dpi or the size");
 }
 
 // Draws the marker with its outer top-left corner at the current origin, `unit` points per unit.
@@ -157,9 +171,11 @@ Surface vector_surface(Format f, const std::string& path, double w, double h) {
 void write_png_marker(const std::string& file, const std::string& path, const Family& family, TagId id,
                       const PrintOptions& o) {
   const double px_per_unit = o.size_m / 0.0254 * o.dpi / family.side();
-  const cv::Mat1b marker = rasterize_marker(family, id, px_per_unit, o.margin_units);
   const double font_px = caption_font_pt(o.size_m * kPointsPerMetre) * o.dpi / 72.0;
-  const int caption_h = o.caption ? int(std::ceil(1.8 * font_px)) : 0;
+  const double caption_px = o.caption ? std::ceil(1.8 * font_px) : 0.0;
+  check_png_side((family.side() + 2 * o.margin_units) * px_per_unit + caption_px + 1);
+  const cv::Mat1b marker = rasterize_marker(family, id, px_per_unit, o.margin_units);
+  const int caption_h = int(caption_px);
   Surface surface(cairo_image_surface_create(CAIRO_FORMAT_RGB24, marker.cols, marker.rows + caption_h));
   check(cairo_surface_status(surface.get()), path);
   cairo_surface_flush(surface.get());
@@ -235,6 +251,7 @@ int write_sheet(const std::string& path, const Family& family, const std::vector
   const double y0 = (page_h - (used_rows * l.height + (used_rows - 1) * gap)) / 2;
 
   const double px_per_pt = options.dpi / 72.0;
+  if (format == Format::png) check_png_side(page_h * px_per_pt);
   Surface surface = format == Format::png
                         ? Surface(cairo_image_surface_create(CAIRO_FORMAT_RGB24, int(std::ceil(page_w * px_per_pt - 1e-6)),
                                                              int(std::ceil(page_h * px_per_pt - 1e-6))))

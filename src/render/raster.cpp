@@ -49,7 +49,9 @@ cv::Mat1b rasterize_marker(const Family& family, TagId id, double pixels_per_uni
   if (!(margin_units >= 0)) throw std::invalid_argument("the margin must not be negative");
   cv::Mat1f cells;
   family.unit_bitmap(id).convertTo(cells, CV_32F, 1.0 / 255);
-  const int side = int(std::ceil((family.side() + 2 * margin_units) * pixels_per_unit - 1e-9));
+  const double side_px = std::ceil((family.side() + 2 * margin_units) * pixels_per_unit - 1e-9);
+  if (!(side_px <= 1 << 16)) throw std::invalid_argument("the marker image would pass 65536 pixels a side");
+  const int side = int(side_px);
   const double origin = margin_units * pixels_per_unit - 0.5;
   const cv::Mat1f image =
       resample_cells(cells, cv::Size(side, side), pixels_per_unit, cv::Point2d(origin, origin), 1.0f);

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // lftag generate: one marker, or a sheet of many, as SVG, PDF or PNG.
+#include <cmath>
 #include <cstdlib>
 #include <iostream>
 #include <stdexcept>
@@ -26,7 +27,7 @@ double parse_length(const std::string& text) {
   else if (unit == "m") scale = 1.0;
   else if (unit == "in") scale = 0.0254;
   else throw std::invalid_argument("size '" + text + "' has an unknown unit: use mm, cm, m or in");
-  if (!(value > 0)) throw std::invalid_argument("size '" + text + "' must be positive");
+  if (!(value > 0) || !std::isfinite(value)) throw std::invalid_argument("size '" + text + "' must be positive");
   return value * scale;
 }
 
@@ -44,10 +45,20 @@ void add_generate_command(CLI::App& app, int& status) {
   cmd->add_option("--id", opt->ids,
                   "Marker id, decimal or 0x-hexadecimal; for a sheet a list with ranges, e.g. 0-11,40")
       ->required();
-  cmd->add_option("--size", opt->size, "Outer edge of the black border: 100mm, 10cm, 0.1m or 4in (default 100mm)");
+  cmd->add_option("--size", opt->size, "Outer edge of the black border: 100mm, 10cm, 0.1m or 4in (default 100mm)")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            try {
+              const double m = parse_length(text);
+              return m >= 1e-4 && m <= 100 ? "" : "size '" + text + "' must be from 0.1 mm to 100 m";
+            } catch (const std::exception& e) {
+              return e.what();
+            }
+          },
+          "LENGTH"));
   cmd->add_option("--margin", opt->margin, "White margin around the border, in marker units (default 2)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--dpi", opt->dpi, "PNG resolution in pixels per inch (default 300)")->check(CLI::PositiveNumber);
+      ->check(finite_in(0, 100));
+  cmd->add_option("--dpi", opt->dpi, "PNG resolution in pixels per inch (default 300)")->check(finite_in(1, 10000));
   cmd->add_flag("--no-caption", opt->no_caption, "Leave out the caption (family, id, size) under the marker");
   cmd->add_flag("--sheet", opt->sheet, "Lay the ids out on pages for printing (implied by several ids)");
   cmd->add_option("--paper", opt->paper, "Sheet paper size: a4 or letter (default a4)");

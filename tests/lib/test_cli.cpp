@@ -64,6 +64,27 @@ TEST(Cli, GenerateRejectsBadInputWithAMessage) {
   EXPECT_NE(r.output.find("--id"), std::string::npos) << r.output;
 }
 
+TEST(Cli, GenerateRejectsNumbersItCannotUse) {
+  // --dpi 1e9 once reached a float-to-int conversion and a misleading message: every number
+  // is an option error (exit 2) naming the option, and a PNG too large for cairo is refused
+  // before anything is drawn, leaving no file.
+  for (const char* bad : {"--dpi 1e9", "--dpi nan", "--dpi 0.5", "--size 1e300", "--size nan", "--size 1e-300mm",
+                          "--size -3", "--margin 1e300", "--margin nan", "--margin -1"}) {
+    const CliResult r = run(std::string("generate --family 3x3 --id 1 ") + bad + " --output " + kTmp + "/bad.png");
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find(std::string(bad).substr(0, std::string(bad).find(' '))), std::string::npos) << r.output;
+  }
+  const std::string huge = kTmp + "/huge.png";
+  std::remove(huge.c_str());
+  const CliResult r = run("generate --family 3x3 --id 1 --size 3m --dpi 1000 --output " + huge);
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_NE(r.output.find("more than 32767"), std::string::npos) << r.output;
+  EXPECT_FALSE(std::ifstream(huge).good());
+  // The extremes of the ranges work where the file can hold them.
+  EXPECT_EQ(run("generate --family 3x3 --id 1 --size 0.1mm --dpi 1 --margin 100 --output " + kTmp + "/small.png").status, 0);
+  EXPECT_EQ(run("generate --family 3x3 --id 1 --size 100m --output " + kTmp + "/big.pdf").status, 0);
+}
+
 TEST(Cli, RenderWritesImageAndTruth) {
   const std::string png = kTmp + "/scene.png";
   const CliResult r = run("render --family 8x8 --id 0x123456789abcdef0123456789abcdef --distance 3 --tilt 30 --noise 2 --output " + png);

@@ -2,6 +2,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include <gtest/gtest.h>
@@ -94,14 +95,34 @@ TEST(Print, ErrorsAreClear) {
   EXPECT_THROW(parse_paper("a5"), std::invalid_argument);
 }
 
+TEST(Print, NumbersOutsideWhatAFileCanHoldAreRefused) {
+  // Each of these once reached a float-to-int conversion (undefined) or a huge allocation.
+  const std::string svg = testing::TempDir() + "/n.svg", png = testing::TempDir() + "/n.png";
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (auto set : std::vector<void (*)(PrintOptions&, double)>{
+           [](PrintOptions& o, double v) { o.size_m = v; }, [](PrintOptions& o, double v) { o.dpi = v; },
+           [](PrintOptions& o, double v) { o.margin_units = v; }})
+    for (double v : {nan, 1e300, -1.0}) {
+      PrintOptions o;
+      set(o, v);
+      EXPECT_THROW(write_marker(png, Family(3), 1, o), std::invalid_argument) << v;
+      EXPECT_THROW(write_sheet(svg, Family(3), {1}, o, Paper::a4), std::invalid_argument) << v;
+    }
+  PrintOptions o;
+  o.dpi = 10000;  // an A4 page at 10000 dpi is 116,929 pixels high
+  EXPECT_THROW(write_sheet(png, Family(3), {1}, o, Paper::a4), std::invalid_argument);
+  o.size_m = 2;  // a 2 m marker at 10000 dpi
+  EXPECT_THROW(write_marker(png, Family(3), 1, o), std::invalid_argument);
+  EXPECT_THROW(rasterize_marker(Family(3), 0, 1e6), std::invalid_argument);
+}
+
 TEST(Print, AFailedWriteLeavesAnExistingFileAlone) {
-  // A4 at 20,000 dpi is wider than cairo's largest image: the write fails after the file
-  // was opened. The file that was there keeps its bytes, and no partial file stays.
+  // A4 at 20,000 dpi is wider than cairo's largest image: refused before the file is touched.
   const std::string path = testing::TempDir() + "/keep.png";
   std::ofstream(path) << "keep me";
   PrintOptions o;
   o.dpi = 20000;
-  EXPECT_THROW(write_sheet(path, Family(3), {1}, o, Paper::a4), std::runtime_error);
+  EXPECT_THROW(write_sheet(path, Family(3), {1}, o, Paper::a4), std::invalid_argument);
   EXPECT_EQ(slurp(path), "keep me");
   EXPECT_FALSE(std::ifstream(path + ".part").good());
   // A write that succeeds replaces it whole.
@@ -110,4 +131,11 @@ TEST(Print, AFailedWriteLeavesAnExistingFileAlone) {
   EXPECT_EQ(cv::imread(path).cols, int(std::ceil(0.210 / 0.0254 * 50 - 1e-6)));
   EXPECT_FALSE(std::ifstream(path + ".part").good());
   std::remove(path.c_str());
+  // A write that fails after drawing (a folder is in the way of the final rename) leaves
+  // no partial file behind.
+  const std::string folder = testing::TempDir() + "/in-the-way.png";
+  ASSERT_EQ(system(("mkdir -p '" + folder + "'").c_str()), 0);
+  EXPECT_THROW(write_marker(folder, Family(3), 1, o), std::runtime_error);
+  EXPECT_FALSE(std::ifstream(folder + ".part").good());
+  ASSERT_EQ(system(("rmdir '" + folder + "'").c_str()), 0);
 }
