@@ -45,6 +45,7 @@
 #include <gst/video/video.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include <lftag/image_file.hpp>
 #include <lftag/render.hpp>
 #include <lftag/tag_id.hpp>
 
@@ -604,11 +605,12 @@ gst_lftag_test_src_start (GstBaseSrc * bsrc)
           ("Background photo \"%s\" does not exist.", path), (nullptr));
       return FALSE;
     }
-    st.photo = cv::imread (s.background_location, cv::IMREAD_GRAYSCALE);
-    if (st.photo.empty ()) {
+    try {
+      st.photo = lftag::read_grey_image (s.background_location);
+    } catch (const std::exception & e) {
       GST_ELEMENT_ERROR (self, RESOURCE, READ,
-          ("Background photo \"%s\" is not an image file that can be read.", path),
-          (nullptr));
+          ("Background photo \"%s\" is not an image file that can be read: %s.", path,
+              e.what ()), (nullptr));
       return FALSE;
     }
   }

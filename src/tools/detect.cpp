@@ -12,6 +12,7 @@
 #include "json.hpp"
 #include "lftag/detector.hpp"
 #include "lftag/draw.hpp"
+#include "lftag/image_file.hpp"
 
 namespace lftag::tools {
 namespace {
@@ -125,8 +126,7 @@ void add_detect_command(CLI::App& app, int& status) {
     for (const std::string& path : opt->images) {
       nlohmann::json out = {{"image", path}};
       try {
-        const cv::Mat grey = cv::imread(path, cv::IMREAD_GRAYSCALE);
-        if (grey.empty()) throw std::runtime_error("cannot read the image (missing, unreadable or not an image)");
+        const cv::Mat grey = read_grey_image(path);
         out["width"] = grey.cols;
         out["height"] = grey.rows;
         auto it = detectors.find({grey.cols, grey.rows});

@@ -10,6 +10,7 @@
 
 #include "commands.hpp"
 #include "json.hpp"
+#include "lftag/image_file.hpp"
 #include "lftag/render.hpp"
 
 namespace lftag::tools {
@@ -130,8 +131,7 @@ void add_render_command(CLI::App& app, int& status) {
       p.noise_sigma = opt->noise;
       p.seed = opt->seed;
       if (!opt->photo.empty()) {
-        p.photo = cv::imread(opt->photo, cv::IMREAD_GRAYSCALE);
-        if (p.photo.empty()) throw std::runtime_error("cannot read background photo '" + opt->photo + "'");
+        p.photo = read_grey_image(opt->photo);
       }
       std::vector<SceneMarker> markers;
       if (!opt->scene.empty()) {

@@ -168,14 +168,25 @@ TEST(Cli, DetectReportsUnreadableImagesAndGoesOn) {
   const std::string good = kTmp + "/det_good.png", junk = kTmp + "/det_junk.png";
   ASSERT_EQ(run("render --id 5 --output " + good).status, 0);
   { std::ofstream(junk) << "not an image"; }
-  const CliResult r = run("detect /nonexistent.png " + junk + " " + good);
+  // A PNG whose header declares 400 megapixels (the data is a 16 x 16 image's) is refused
+  // before decoding, with the limit in the message.
+  const std::string huge = kTmp + "/det_huge.png";
+  ASSERT_TRUE(cv::imwrite(huge, cv::Mat(16, 16, CV_8U, cv::Scalar(0))));
+  {
+    std::fstream f(huge, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(16);
+    const char size[8] = {0, 0, 0x4e, 0x20, 0, 0, 0x4e, 0x20};  // 20000 x 20000, big-endian
+    f.write(size, 8);
+  }
+  const CliResult r = run("detect /nonexistent.png " + junk + " " + huge + " " + good);
   EXPECT_EQ(r.status, 1);
   const auto lines = json_lines(r.output);
-  ASSERT_EQ(lines.size(), 3u) << r.output;
+  ASSERT_EQ(lines.size(), 4u) << r.output;
   EXPECT_TRUE(lines[0].contains("error"));
   EXPECT_TRUE(lines[1].contains("error"));
-  EXPECT_EQ(lines[2]["detections"].size(), 1u);
-  EXPECT_FALSE(lines[2]["detections"][0]["pose"]["calibrated"].get<bool>());  // the default camera
+  EXPECT_NE(lines[2].value("error", "").find("20000x20000 pixels, more than the limit"), std::string::npos) << r.output;
+  EXPECT_EQ(lines[3]["detections"].size(), 1u);
+  EXPECT_FALSE(lines[3]["detections"][0]["pose"]["calibrated"].get<bool>());  // the default camera
   EXPECT_EQ(r.output.find("WARN"), std::string::npos) << r.output;
 }
 
