@@ -13,9 +13,10 @@
  * copied: only the buffer's metadata changes. Every frame gets:
  *
  * - an LFTagMeta, the authoritative record: a GstCustomMeta (see lftag-meta.h)
- *   whose structure holds the analysed frame's "width" and "height" and
- *   "detections", an array of "lftag/detection" structures (empty when nothing
- *   was found). It has no tags, so videoconvert, videoscale, queue, tee and
+ *   whose structure holds the analysed frame's "width" and "height",
+ *   "analysed" (FALSE when the frame was passed on without detection: late, see
+ *   #GstLFTagDetect:late-frames, or unreadable) and "detections", an array of
+ *   "lftag/detection" structures (empty when nothing was found). It has no tags, so videoconvert, videoscale, queue, tee and
  *   encoders keep it; its coordinates stay those of the analysed frame. It
  *   replaces an LFTagMeta the buffer already carried.
  * - one GstVideoRegionOfInterestMeta per detection: roi_type "lftag", ids
@@ -110,6 +111,7 @@ enum
   PROP_MIN_SPREAD_RATIO,
   PROP_MAX_DECODE_ERROR,
   PROP_MAX_CELL_RESIDUAL,
+  PROP_LATE_FRAMES,
 };
 
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
@@ -120,6 +122,7 @@ enum
 #define DEFAULT_PROP_DISTORTION nullptr
 #define DEFAULT_PROP_OVERLAY 0
 #define DEFAULT_PROP_MESSAGE TRUE
+#define DEFAULT_PROP_LATE_FRAMES GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE
 /* The detector's own parameters default to the library's (DetectorParams). */
 
 #define DETECT_FORMATS "{ GRAY8, I420, YV12, NV12, NV21, Y42B, Y444, RGB, BGR, " \
@@ -147,6 +150,20 @@ gst_lftag_detect_overlay_get_type (void)
     {0, nullptr, nullptr},
   };
   static const GType type = g_flags_register_static ("GstLFTagDetectOverlay", values);
+  return type;
+}
+
+#define GST_TYPE_LFTAG_DETECT_LATE_FRAMES (gst_lftag_detect_late_frames_get_type ())
+static GType
+gst_lftag_detect_late_frames_get_type (void)
+{
+  static const GEnumValue values[] = {
+    {GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE, "Analyse every frame, however late", "analyse"},
+    {GST_LFTAG_DETECT_LATE_FRAMES_SKIP,
+        "Pass late frames on unanalysed, their meta saying so", "skip"},
+    {0, nullptr, nullptr},
+  };
+  static const GType type = g_enum_register_static ("GstLFTagDetectLateFrames", values);
   return type;
 }
 
@@ -191,6 +208,7 @@ struct Settings {
   bool tag_size_set = false;    /* a metric pose was asked for */
   guint overlay = DEFAULT_PROP_OVERLAY;
   bool message = DEFAULT_PROP_MESSAGE;
+  GstLFTagDetectLateFrames late_frames = DEFAULT_PROP_LATE_FRAMES;
 
   Settings () {
     const lftag::DetectorParams defaults;
@@ -215,6 +233,14 @@ struct State {
   std::optional<lftag::Detector> detector;
   DetectorSettings built, rejected;     /* the detector's settings; a set that failed */
   bool warned_uncalibrated = false;
+  guint64 analysed = 0, skipped = 0;    /* frames, for QoS messages */
+};
+
+/* Downstream's latest QoS report: frames due before `earliest` (running time) are
+ * late. Written by the src pad's event handler, read by the streaming thread. */
+struct Lateness {
+  GstClockTime earliest;
+  gdouble proportion;
 };
 
 /* "k1,k2,p1,p2[,k3[,k4,k5,k6]]" as OpenCV orders them, with a decimal point
@@ -300,6 +326,7 @@ struct _GstLFTagDetect
 
   Settings *settings;
   State *state;
+  Lateness lateness;            /* under the object lock */
 };
 
 static void gst_lftag_detect_set_property (GObject * object, guint prop_id,
@@ -312,6 +339,7 @@ static gboolean gst_lftag_detect_start (GstBaseTransform * trans);
 static gboolean gst_lftag_detect_stop (GstBaseTransform * trans);
 static GstFlowReturn gst_lftag_detect_transform_ip (GstBaseTransform * trans,
     GstBuffer * buffer);
+static gboolean gst_lftag_detect_src_event (GstBaseTransform * trans, GstEvent * event);
 static gboolean gst_lftag_detect_set_info (GstVideoFilter * filter, GstCaps * incaps,
     GstVideoInfo * in_info, GstCaps * outcaps, GstVideoInfo * out_info);
 
@@ -427,6 +455,12 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
           "A reading is rejected when a square lies further than this from its "
           "decoded position, in marker units (positions are 1 unit apart)",
           0.01, 1.0, defaults.max_cell_residual, playing));
+  g_object_class_install_property (gobject_class, PROP_LATE_FRAMES,
+      g_param_spec_enum ("late-frames", "Late frames",
+          "What to do with a frame that a synchronised sink reports late (QoS): "
+          "analyse it anyway, or pass it on unanalysed (its LFTagMeta has "
+          "\"analysed\" FALSE, and a QoS message counts it). No frame is ever dropped",
+          GST_TYPE_LFTAG_DETECT_LATE_FRAMES, DEFAULT_PROP_LATE_FRAMES, playing));
 
   gst_element_class_set_static_metadata (element_class,
       "LFTag detector", "Filter/Analyzer/Video",
@@ -441,9 +475,11 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
   trans_class->stop = GST_DEBUG_FUNCPTR (gst_lftag_detect_stop);
   /* Our own in-place transform: GstVideoFilter's maps every frame writable. */
   trans_class->transform_ip = GST_DEBUG_FUNCPTR (gst_lftag_detect_transform_ip);
+  trans_class->src_event = GST_DEBUG_FUNCPTR (gst_lftag_detect_src_event);
   filter_class->set_info = GST_DEBUG_FUNCPTR (gst_lftag_detect_set_info);
 
   gst_type_mark_as_plugin_api (GST_TYPE_LFTAG_DETECT_OVERLAY, GstPluginAPIFlags (0));
+  gst_type_mark_as_plugin_api (GST_TYPE_LFTAG_DETECT_LATE_FRAMES, GstPluginAPIFlags (0));
 
   /* So that applications find the meta by name as soon as the element exists. */
   lftag::gst::detection_meta_info ();
@@ -457,6 +493,10 @@ gst_lftag_detect_init (GstLFTagDetect * self)
   /* Never passthrough (metadata is added to every buffer), always in place. */
   gst_base_transform_set_passthrough (GST_BASE_TRANSFORM (self), FALSE);
   gst_base_transform_set_in_place (GST_BASE_TRANSFORM (self), TRUE);
+  /* GstVideoFilter drops frames that QoS reports late: an analyser must not lose
+   * them from its results. Late frames are handled by the late-frames property. */
+  gst_base_transform_set_qos_enabled (GST_BASE_TRANSFORM (self), FALSE);
+  self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
 }
 
 static void
@@ -544,6 +584,9 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
     case PROP_MESSAGE:
       s.message = g_value_get_boolean (value);
       break;
+    case PROP_LATE_FRAMES:
+      s.late_frames = GstLFTagDetectLateFrames (g_value_get_enum (value));
+      break;
     case PROP_THRESHOLD_WINDOW:
       s.detector.threshold_window = g_value_get_int (value);
       break;
@@ -614,6 +657,9 @@ gst_lftag_detect_get_property (GObject * object, guint prop_id, GValue * value,
     case PROP_MESSAGE:
       g_value_set_boolean (value, s.message);
       break;
+    case PROP_LATE_FRAMES:
+      g_value_set_enum (value, s.late_frames);
+      break;
     case PROP_THRESHOLD_WINDOW:
       g_value_set_int (value, s.detector.threshold_window);
       break;
@@ -662,6 +708,10 @@ gst_lftag_detect_start (GstBaseTransform * trans)
   st.calibration.reset ();
   st.detector.reset ();
   st.warned_uncalibrated = false;
+  st.analysed = st.skipped = 0;
+  GST_OBJECT_LOCK (self);
+  self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
+  GST_OBJECT_UNLOCK (self);
   if (s.calibration_file.empty ())
     return TRUE;
 
@@ -905,6 +955,88 @@ gst_lftag_detect_draw (State & st, GstVideoFrame * frame, const Settings & s,
   gst_video_overlay_composition_unref (composition);
 }
 
+/* Remembers downstream's QoS reports (the base class would drop late frames on
+ * them, which is switched off), then lets the base class pass them upstream. */
+static gboolean
+gst_lftag_detect_src_event (GstBaseTransform * trans, GstEvent * event)
+{
+  GstLFTagDetect *self = GST_LFTAG_DETECT (trans);
+
+  if (GST_EVENT_TYPE (event) == GST_EVENT_QOS) {
+    GstQOSType type;
+    gdouble proportion;
+    GstClockTimeDiff diff;
+    GstClockTime timestamp;
+    gst_event_parse_qos (event, &type, &proportion, &diff, &timestamp);
+    GST_OBJECT_LOCK (self);
+    if (GST_CLOCK_TIME_IS_VALID (timestamp)) {
+      /* A late frame (diff > 0) means the next ones are late by as much again. */
+      self->lateness.earliest = diff > 0 ? timestamp + 2 * GstClockTime (diff) :
+          GstClockTime (std::max < GstClockTimeDiff > (0, GstClockTimeDiff (timestamp) + diff));
+      self->lateness.proportion = proportion;
+    }
+    GST_OBJECT_UNLOCK (self);
+  } else if (GST_EVENT_TYPE (event) == GST_EVENT_FLUSH_START) {
+    GST_OBJECT_LOCK (self);
+    self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
+    GST_OBJECT_UNLOCK (self);
+  }
+  return GST_BASE_TRANSFORM_CLASS (parent_class)->src_event (trans, event);
+}
+
+/* The meta of a frame passed on without analysis: no detections, "analysed" FALSE. */
+static void
+gst_lftag_detect_add_unanalysed_meta (GstBuffer * buffer, const GstVideoInfo * info)
+{
+  gst_lftag_detect_clear_metas (buffer);
+  lftag::gst::add_detection_meta (buffer, GST_VIDEO_INFO_WIDTH (info),
+      GST_VIDEO_INFO_HEIGHT (info), {}, false);
+}
+
+/* Whether downstream's last QoS report makes this buffer late. */
+static bool
+gst_lftag_detect_is_late (GstLFTagDetect * self, GstBuffer * buffer, gdouble * proportion,
+    GstClockTimeDiff * jitter)
+{
+  const GstSegment *segment = &GST_BASE_TRANSFORM (self)->segment;
+  if (segment->format != GST_FORMAT_TIME || !GST_BUFFER_PTS_IS_VALID (buffer))
+    return false;
+  const GstClockTime running = gst_segment_to_running_time (segment, GST_FORMAT_TIME,
+      GST_BUFFER_PTS (buffer));
+  GST_OBJECT_LOCK (self);
+  const Lateness l = self->lateness;
+  GST_OBJECT_UNLOCK (self);
+  if (!GST_CLOCK_TIME_IS_VALID (running) || !GST_CLOCK_TIME_IS_VALID (l.earliest)
+      || running > l.earliest)
+    return false;
+  *proportion = l.proportion;
+  *jitter = GstClockTimeDiff (l.earliest) - GstClockTimeDiff (running);
+  return true;
+}
+
+/* A late frame passed on unanalysed: a meta that says so, and a QoS message
+ * counting it, as GStreamer elements report frames they degrade. */
+static void
+gst_lftag_detect_skip_late (GstLFTagDetect * self, GstBuffer * buffer,
+    const GstVideoInfo * info, gdouble proportion, GstClockTimeDiff jitter)
+{
+  State & st = *self->state;
+  ++st.skipped;
+  gst_lftag_detect_add_unanalysed_meta (buffer, info);
+
+  const GstSegment *segment = &GST_BASE_TRANSFORM (self)->segment;
+  const GstClockTime pts = GST_BUFFER_PTS (buffer);
+  GstMessage *qos = gst_message_new_qos (GST_OBJECT (self), FALSE,
+      gst_segment_to_running_time (segment, GST_FORMAT_TIME, pts),
+      gst_segment_to_stream_time (segment, GST_FORMAT_TIME, pts), pts,
+      GST_BUFFER_DURATION (buffer));
+  gst_message_set_qos_values (qos, jitter, proportion, 1000000);
+  gst_message_set_qos_stats (qos, GST_FORMAT_BUFFERS, st.analysed, st.skipped);
+  gst_element_post_message (GST_ELEMENT (self), qos);
+  GST_DEBUG_OBJECT (self, "late by %" GST_STIME_FORMAT ": %" GST_TIME_FORMAT
+      " passed on unanalysed", GST_STIME_ARGS (jitter), GST_TIME_ARGS (pts));
+}
+
 static GstFlowReturn
 gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
 {
@@ -921,6 +1053,14 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
   if (!gst_lftag_detect_update_detector (self, s, info))
     return GST_FLOW_ERROR;
 
+  gdouble proportion;
+  GstClockTimeDiff jitter;
+  if (s.late_frames == GST_LFTAG_DETECT_LATE_FRAMES_SKIP
+      && gst_lftag_detect_is_late (self, buffer, &proportion, &jitter)) {
+    gst_lftag_detect_skip_late (self, buffer, info, proportion, jitter);
+    return GST_FLOW_OK;
+  }
+
   const Camera & camera = st.detector->params ().camera;
   const bool metric = (s.overlay & GST_LFTAG_DETECT_OVERLAY_AXES) || s.tag_size_set;
   if (metric && !camera.calibrated && !st.warned_uncalibrated) {
@@ -936,6 +1076,7 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
   if (!gst_video_frame_map (&frame, info, buffer, GST_MAP_READ)) {
     GST_WARNING_OBJECT (self, "cannot map %" GST_PTR_FORMAT ", passed on unanalysed",
         buffer);
+    gst_lftag_detect_add_unanalysed_meta (buffer, info);
     return GST_FLOW_OK;
   }
   std::vector<Detection> detections;
@@ -945,9 +1086,11 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
     gst_video_frame_unmap (&frame);
     GST_WARNING_OBJECT (self, "detection failed on %" GST_PTR_FORMAT
         ", passed on unanalysed: %s", buffer, e.what ());
+    gst_lftag_detect_add_unanalysed_meta (buffer, info);
     return GST_FLOW_OK;
   }
   gst_video_frame_unmap (&frame);
+  ++st.analysed;
   GST_LOG_OBJECT (self, "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT,
       detections.size (), GST_TIME_ARGS (GST_BUFFER_PTS (buffer)));
 

@@ -26,6 +26,21 @@ typedef enum {
   GST_LFTAG_DETECT_OVERLAY_AXES = (1 << 2),
 } GstLFTagDetectOverlay;
 
+/**
+ * GstLFTagDetectLateFrames:
+ * @GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE: analyse every frame, however late
+ * @GST_LFTAG_DETECT_LATE_FRAMES_SKIP: pass a frame that a synchronised sink
+ *     reported late on without analysing it; its LFTagMeta says "analysed" FALSE
+ *
+ * What lftagdetect does with a frame that arrives after the time downstream QoS
+ * says it is due. It never drops one: an analyser's results must account for
+ * every frame.
+ */
+typedef enum {
+  GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE = 0,
+  GST_LFTAG_DETECT_LATE_FRAMES_SKIP = 1,
+} GstLFTagDetectLateFrames;
+
 GST_ELEMENT_REGISTER_DECLARE (lftagdetect);
 
 G_END_DECLS

@@ -16,6 +16,10 @@
  *
  * LFTagMeta ("LFTagMeta"): what a detector found.
  *   width, height      gint                 the analysed frame
+ *   analysed           gboolean             FALSE when the frame was passed on without
+ *                                           detection (late under QoS with
+ *                                           late-frames=skip, or unreadable): its empty
+ *                                           detections say nothing about markers
  *   detections         GstValueArray of GstStructure "lftag/detection"
  *
  * LFTagTruthMeta ("LFTagTruthMeta"): GROUND TRUTH, attached by lftagtestsrc to
@@ -68,6 +72,7 @@ G_BEGIN_DECLS
 /* Fields of the metas' own structures. */
 #define LFTAG_META_FIELD_WIDTH "width"
 #define LFTAG_META_FIELD_HEIGHT "height"
+#define LFTAG_META_FIELD_ANALYSED "analysed"
 #define LFTAG_META_FIELD_DETECTIONS "detections"
 #define LFTAG_META_FIELD_MARKERS "markers"
 #define LFTAG_META_FIELD_FX "fx"

@@ -259,11 +259,12 @@ void set_detections(GstStructure* s, const char* field, const std::vector<Detect
   set_structures(s, field, items);
 }
 
-void add_detection_meta(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections) {
+void add_detection_meta(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections,
+                        bool analysed) {
   detection_meta_info();
   GstStructure* s = gst_custom_meta_get_structure(gst_buffer_add_custom_meta(buffer, LFTAG_META_NAME));
   gst_structure_set(s, LFTAG_META_FIELD_WIDTH, G_TYPE_INT, width, LFTAG_META_FIELD_HEIGHT, G_TYPE_INT, height,
-                    nullptr);
+                    LFTAG_META_FIELD_ANALYSED, G_TYPE_BOOLEAN, gboolean(analysed), nullptr);
   set_detections(s, LFTAG_META_FIELD_DETECTIONS, detections);
 }
 
@@ -321,6 +322,11 @@ std::optional<FrameDetections> read_detection_meta(GstBuffer* buffer) {
   FrameDetections frame;
   frame.width = get_int(s, LFTAG_META_FIELD_WIDTH);
   frame.height = get_int(s, LFTAG_META_FIELD_HEIGHT);
+  gboolean analysed = TRUE;  // metas before the field existed were always analysed
+  if (gst_structure_has_field(s, LFTAG_META_FIELD_ANALYSED) &&
+      !gst_structure_get_boolean(s, LFTAG_META_FIELD_ANALYSED, &analysed))
+    malformed(s, LFTAG_META_FIELD_ANALYSED, "is not a boolean");
+  frame.analysed = analysed;
   frame.detections = read_list(s, LFTAG_META_FIELD_DETECTIONS, LFTAG_DETECTION_STRUCTURE_NAME,
                                detection_from_structure);
   return frame;

@@ -30,7 +30,9 @@ GstStructure* truth_structure(const MarkerTruth& truth);
 void set_detections(GstStructure* s, const char* field, const std::vector<Detection>& detections);
 
 // Attach a meta to a writable buffer.
-void add_detection_meta(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections);
+// `analysed` false: the frame was passed on without detection (late, or unreadable).
+void add_detection_meta(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections,
+                        bool analysed = true);
 // The frame size is the camera's.
 void add_truth_meta(GstBuffer* buffer, const Camera& camera, const std::vector<MarkerTruth>& markers);
 
@@ -41,6 +43,7 @@ MarkerTruth truth_from_structure(const GstStructure* s);
 
 struct FrameDetections {
   int width = 0, height = 0;
+  bool analysed = true;
   std::vector<Detection> detections;
 };
 struct FrameTruth {

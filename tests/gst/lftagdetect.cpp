@@ -987,11 +987,71 @@ GST_START_TEST(test_bad_frame_passes) {
   GstBuffer* out = gst_harness_push_and_pull(h, small);
   fail_unless(out != nullptr);
   fail_unless_equals_int(gst_buffer_get_size(out), 1000);
-  fail_unless(lftag_meta_get_structure(out, LFTAG_META_NAME) == nullptr);
+  // Its meta says it was not analysed: no detections here means nothing.
+  fail_if(detections_of(out).analysed);
+  fail_unless_equals_int(detections_of(out).detections.size(), 0);
   gst_buffer_unref(out);
   out = gst_harness_push_and_pull(h, gst_buffer_ref(frames.buffers[0]));
   fail_unless_equals_int(detections_of(out).detections.size(), 1);
   gst_buffer_unref(out);
+  gst_harness_teardown(h);
+}
+GST_END_TEST;
+
+// Under QoS no frame is dropped: by default a late frame is analysed like any other;
+// with late-frames=skip it passes on unanalysed, its meta and a QoS message say so.
+GST_START_TEST(test_late_frames) {
+  Frames frames;
+  pull_frames(frames, "lftagtestsrc num-buffers=4", nullptr, 4);
+  GstHarness* h = detector("", frames.info);
+  GstElement* element = element_of(h);
+  GstBus* bus = gst_bus_new();
+  gst_element_set_bus(element, bus);
+  gboolean qos = TRUE;
+  g_object_get(element, "qos", &qos, nullptr);
+  fail_if(qos, "the base class's dropping of late frames is off");
+
+  auto pts = [&](int i) { return GST_BUFFER_PTS(frames.buffers[i]); };
+  auto push = [&](int i) {
+    GstBuffer* out = gst_harness_push_and_pull(h, gst_buffer_ref(frames.buffers[i]));
+    fail_unless(out != nullptr, "frame %d was dropped", i);
+    fail_unless_equals_uint64(GST_BUFFER_PTS(out), pts(i));
+    const FrameDetections d = detections_of(out);
+    gst_buffer_unref(out);
+    return d;
+  };
+  fail_unless(push(0).analysed);
+  // The sink reports frame 0 rendered 50 ms late: frames due before pts(0) + 100 ms are late.
+  fail_unless(gst_harness_push_upstream_event(h, gst_event_new_qos(GST_QOS_TYPE_UNDERFLOW, 0.5, 50 * GST_MSECOND, pts(0))));
+  FrameDetections d = push(1);
+  fail_unless(d.analysed);
+  fail_unless_equals_int(d.detections.size(), 1);
+  fail_unless(gst_bus_pop_filtered(bus, GST_MESSAGE_QOS) == nullptr);
+
+  g_object_set(element, "late-frames", 1 /* skip */, nullptr);
+  d = push(2);
+  fail_if(d.analysed, "frame 2 is late");
+  fail_unless_equals_int(d.detections.size(), 0);
+  GstMessage* m = gst_bus_pop_filtered(bus, GST_MESSAGE_QOS);
+  fail_unless(m != nullptr, "no QoS message for the skipped frame");
+  GstFormat format;
+  guint64 processed, dropped;
+  gst_message_parse_qos_stats(m, &format, &processed, &dropped);
+  fail_unless_equals_int(format, GST_FORMAT_BUFFERS);
+  fail_unless_equals_uint64(processed, 2);
+  fail_unless_equals_uint64(dropped, 1);
+  gst_message_unref(m);
+
+  // On time again (rendered 10 ms early): frame 3 is analysed.
+  fail_unless(gst_harness_push_upstream_event(h, gst_event_new_qos(GST_QOS_TYPE_OVERFLOW, 1.0, -10 * GST_MSECOND, pts(2))));
+  d = push(3);
+  fail_unless(d.analysed);
+  fail_unless_equals_int(d.detections.size(), 1);
+  fail_unless(gst_bus_pop_filtered(bus, GST_MESSAGE_QOS) == nullptr);
+
+  gst_element_set_bus(element, nullptr);
+  gst_object_unref(bus);
+  gst_object_unref(element);
   gst_harness_teardown(h);
 }
 GST_END_TEST;
@@ -1024,6 +1084,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_calibration);
   tcase_add_test(tc, test_uncalibrated_warning);
   tcase_add_test(tc, test_bad_frame_passes);
+  tcase_add_test(tc, test_late_frames);
   return s;
 }
 
