@@ -4,6 +4,7 @@
 // buffers, the metas downstream, region-of-interest metas, bus messages, property
 // changes while playing, calibration errors and warnings, and the overlay.
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -1056,6 +1057,63 @@ GST_START_TEST(test_late_frames) {
 }
 GST_END_TEST;
 
+// The same in a live pipeline whose frames reach a synchronised sink late (a slow element
+// upstream): every frame comes out with a meta, in both modes; with skip, the late ones
+// unanalysed and counted in QoS messages.
+GST_START_TEST(test_late_frames_in_a_live_pipeline) {
+  for (const char* mode : {"analyse", "skip"}) {
+    const std::string launch = std::string("lftagtestsrc is-live=true num-buffers=20 ! identity sleep-time=80000 ! "
+                                           "lftagdetect name=d late-frames=") +
+                               mode + " ! fakesink name=sink sync=true qos=true";
+    GstElement* pipeline = gst_parse_launch(launch.c_str(), nullptr);
+    struct Count {
+      std::atomic<int> frames{0}, analysed{0};
+    } count;
+    GstElement* sink = gst_bin_get_by_name(GST_BIN(pipeline), "sink");
+    GstPad* pad = gst_element_get_static_pad(sink, "sink");
+    gst_pad_add_probe(
+        pad, GST_PAD_PROBE_TYPE_BUFFER,
+        [](GstPad*, GstPadProbeInfo* info, gpointer data) {
+          auto* count = static_cast<Count*>(data);
+          ++count->frames;
+          if (lftag::gst::read_detection_meta(GST_PAD_PROBE_INFO_BUFFER(info))->analysed) ++count->analysed;
+          return GST_PAD_PROBE_OK;
+        },
+        &count, nullptr);
+    gst_object_unref(pad);
+    gst_object_unref(sink);
+    GstBus* bus = gst_element_get_bus(pipeline);
+    fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+    int skipped_reported = 0;
+    while (GstMessage* m = gst_bus_timed_pop_filtered(
+               bus, 60 * GST_SECOND, GstMessageType(GST_MESSAGE_QOS | GST_MESSAGE_EOS | GST_MESSAGE_ERROR))) {
+      const GstMessageType type = GST_MESSAGE_TYPE(m);
+      fail_if(type == GST_MESSAGE_ERROR);
+      if (type == GST_MESSAGE_QOS && g_str_equal(GST_OBJECT_NAME(GST_MESSAGE_SRC(m)), "d")) {
+        GstFormat format;
+        guint64 processed, dropped;
+        gst_message_parse_qos_stats(m, &format, &processed, &dropped);
+        skipped_reported = int(dropped);
+      }
+      gst_message_unref(m);
+      if (type == GST_MESSAGE_EOS) break;
+    }
+    gst_element_set_state(pipeline, GST_STATE_NULL);
+    gst_object_unref(bus);
+    gst_object_unref(pipeline);
+    fail_unless_equals_int(count.frames.load(), 20);
+    if (g_str_equal(mode, "analyse")) {
+      fail_unless_equals_int(count.analysed.load(), 20);
+      fail_unless_equals_int(skipped_reported, 0);
+    } else {
+      // 80 ms a frame at 30 fps: the frames fall further and further behind.
+      fail_unless(count.analysed.load() < 20, "no late frame was skipped");
+      fail_unless_equals_int(skipped_reported, 20 - count.analysed.load());
+    }
+  }
+}
+GST_END_TEST;
+
 static Suite* lftagdetect_suite(void) {
   Suite* s = suite_create("lftagdetect");
   TCase* tc = tcase_create("general");
@@ -1085,6 +1143,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_uncalibrated_warning);
   tcase_add_test(tc, test_bad_frame_passes);
   tcase_add_test(tc, test_late_frames);
+  tcase_add_test(tc, test_late_frames_in_a_live_pipeline);
   return s;
 }
 
