@@ -6,7 +6,7 @@
 #   examples/pipelines.sh testsrc-to-file annotated.webm          the same into a video file
 #   examples/pipelines.sh file-to-file recording.mp4 annotated.webm   a recording, annotated
 #
-# From an uninstalled build, prefix `meson devenv -C build` (and give absolute paths).
+# From an uninstalled build, prefix `meson devenv -C build --workdir .` (run from the checkout).
 # SINK (default autovideosink) and FRAMES (default 300) change the screen's sink and the
 # synthetic videos' length; the tests run every line with SINK=fakesink.
 set -euo pipefail

@@ -464,10 +464,12 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
 
   gst_element_class_set_static_metadata (element_class,
       "LFTag detector", "Filter/Analyzer/Video",
-      "Finds LFTag fiducial markers, decodes their ids and estimates their poses: "
-      "an LFTagMeta and region-of-interest metas on every frame, lftag element "
-      "messages, and an optional overlay",
-      "The LFTag developers");
+      "Finds LFTag fiducial markers, decodes their ids and estimates their poses. "
+      "Every frame gets an LFTagMeta (each marker's family, id, key points, corners, "
+      "centroids and pose) and a region-of-interest meta per marker; frames with "
+      "markers post an \"lftag\" element message with the same detections; an "
+      "optional overlay draws outlines, ids and axes",
+      LFTAG_AUTHOR);
   gst_element_class_add_static_pad_template (element_class, &sink_template);
   gst_element_class_add_static_pad_template (element_class, &src_template);
 

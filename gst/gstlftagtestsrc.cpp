@@ -367,7 +367,7 @@ gst_lftag_test_src_class_init (GstLFTagTestSrcClass * klass)
       "LFTag test source", "Source/Video",
       "Renders LFTag markers moving along smooth 6-DoF paths, with the ground truth "
       "attached to every frame as an LFTagTruthMeta",
-      "The LFTag developers");
+      LFTAG_AUTHOR);
   gst_element_class_add_static_pad_template (element_class, &src_template);
 
   basesrc_class->start = GST_DEBUG_FUNCPTR (gst_lftag_test_src_start);

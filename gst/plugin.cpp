@@ -21,4 +21,4 @@ plugin_init (GstPlugin * plugin)
 GST_PLUGIN_DEFINE (GST_VERSION_MAJOR, GST_VERSION_MINOR, lftag,
     "LFTag fiducial markers: detection with metadata, messages and overlay; "
     "synthetic video with ground truth",
-    plugin_init, VERSION, "LGPL", PACKAGE, GST_PACKAGE_ORIGIN)
+    plugin_init, VERSION, "LGPL", GST_PACKAGE_NAME, GST_PACKAGE_ORIGIN)
