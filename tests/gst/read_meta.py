@@ -87,6 +87,7 @@ def detections_and_regions():
     assert meta is not None, "no LFTagMeta"
     s = meta.get_structure()
     assert (s.get_value("width"), s.get_value("height")) == (640, 480)
+    assert s.get_value("analysed") is True
     detections = list(s.get_value("detections"))
     assert sorted(d.get_value("id") for d in detections) == [42, 6789]
     for number, d in enumerate(detections):
