@@ -87,6 +87,7 @@
 
 #include "elementcamera.h"
 #include "lftagmeta.h"
+#include "propertystate.h"
 
 GST_DEBUG_CATEGORY_STATIC (gst_lftag_detect_debug);
 #define GST_CAT_DEFAULT gst_lftag_detect_debug
@@ -517,6 +518,8 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
     const GValue * value, GParamSpec * pspec)
 {
   GstLFTagDetect *self = GST_LFTAG_DETECT (object);
+  if (!lftag::gst::property_settable_now (GST_ELEMENT (self), pspec))
+    return;
   std::vector<Family> families;
   std::vector<double> distortion;
   const gchar *text = nullptr;

@@ -52,6 +52,7 @@
 #include "elementcamera.h"
 #include "lftagmeta.h"
 #include "markermotion.h"
+#include "propertystate.h"
 
 GST_DEBUG_CATEGORY_STATIC (gst_lftag_test_src_debug);
 #define GST_CAT_DEFAULT gst_lftag_test_src_debug
@@ -416,6 +417,8 @@ gst_lftag_test_src_set_property (GObject * object, guint prop_id,
   GstLFTagTestSrc *self = GST_LFTAG_TEST_SRC (object);
   std::vector<TagId> ids;
 
+  if (!lftag::gst::property_settable_now (GST_ELEMENT (self), pspec))
+    return;
   switch (prop_id) {
     case PROP_IS_LIVE:         /* takes the object lock itself */
       gst_base_src_set_live (GST_BASE_SRC (self), g_value_get_boolean (value));

@@ -908,6 +908,42 @@ GST_START_TEST(test_bad_calibration_files) {
 }
 GST_END_TEST;
 
+// calibration-file is read when the element starts: a change while playing is refused
+// with a warning naming it, and the old value stays (it used to be stored and ignored).
+GST_START_TEST(test_calibration_change_while_playing) {
+  const std::string file = std::string(LFTAG_TEST_DATA) + "/opencv_sample.yml";
+  GstElement* pipeline = gst_parse_launch(
+      ("lftagtestsrc is-live=true ! lftagdetect name=d calibration-file=" + file + " ! fakesink").c_str(), nullptr);
+  GstElement* d = gst_bin_get_by_name(GST_BIN(pipeline), "d");
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+  fail_unless(gst_element_get_state(pipeline, nullptr, nullptr, 30 * GST_SECOND) == GST_STATE_CHANGE_SUCCESS);
+  g_object_set(d, "calibration-file", "/other/camera.yml", nullptr);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  GstMessage* m = gst_bus_timed_pop_filtered(bus, 30 * GST_SECOND, GST_MESSAGE_WARNING);
+  fail_unless(m != nullptr, "no warning");
+  GError* error = nullptr;
+  gst_message_parse_warning(m, &error, nullptr);
+  fail_unless(std::string(error->message).find("\"calibration-file\" can only change") != std::string::npos, "%s",
+              error->message);
+  g_error_free(error);
+  gst_message_unref(m);
+  gchar* now = nullptr;
+  g_object_get(d, "calibration-file", &now, nullptr);
+  fail_unless_equals_string(now, file.c_str());
+  g_free(now);
+  // In READY it may change again.
+  gst_element_set_state(pipeline, GST_STATE_READY);
+  g_object_set(d, "calibration-file", "/other/camera.yml", nullptr);
+  g_object_get(d, "calibration-file", &now, nullptr);
+  fail_unless_equals_string(now, "/other/camera.yml");
+  g_free(now);
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(bus);
+  gst_object_unref(d);
+  gst_object_unref(pipeline);
+}
+GST_END_TEST;
+
 // With the camera that rendered the frames (from the file, scaled to the frame, or
 // given property by property) poses are calibrated and accurate, distortion included.
 GST_START_TEST(test_calibration) {
@@ -1140,6 +1176,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_changes_from_another_thread);
   tcase_add_test(tc, test_bad_calibration_files);
   tcase_add_test(tc, test_calibration);
+  tcase_add_test(tc, test_calibration_change_while_playing);
   tcase_add_test(tc, test_uncalibrated_warning);
   tcase_add_test(tc, test_bad_frame_passes);
   tcase_add_test(tc, test_late_frames);

@@ -673,6 +673,22 @@ GST_START_TEST(test_changes_while_playing)
   g_object_set(src, "family", 4, nullptr);
   wait_for([&] { return log.last() == third; }, "the change of family");
 
+  // A property read only when the source starts is refused out loud while playing, and
+  // keeps its value (it was stored and silently ignored).
+  g_object_set(src, "speed", 5.0, "calibration-file", "/some/camera.yml", nullptr);
+  for (const char* name : {"speed", "calibration-file"}) {
+    warning = pop_message(pipeline, GST_MESSAGE_WARNING);
+    gst_message_parse_warning(warning, &error, nullptr);
+    fail_unless(std::string(error->message).find(std::string("\"") + name + "\" can only change in the NULL or READY "
+                                                 "state, not in PLAYING") != std::string::npos, "%s", error->message);
+    g_error_free(error);
+    gst_message_unref(warning);
+  }
+  double speed = 0;
+  gchar* calibration = nullptr;
+  g_object_get(src, "speed", &speed, "calibration-file", &calibration, nullptr);
+  fail_unless(speed == 1.0 && calibration == nullptr, "speed %g, calibration %s", speed, calibration);
+
   gst_element_set_state(pipeline, GST_STATE_NULL);
   // Each frame shows one whole set, and the sets follow in order.
   std::size_t stage = 0;
