@@ -5,8 +5,10 @@
  *
  * Finds LFTag fiducial markers in video, decodes their ids exactly (up to 124
  * bits for 8x8) and estimates their 6-DoF poses. It runs on the luma plane of
- * GRAY8 and planar or semi-planar YUV frames without copying it, and on luma
- * computed from RGB frames (BT.601 weights), at any size and stride.
+ * GRAY8 and 8-bit planar or semi-planar YUV frames without copying it, on the
+ * luma of packed 4:2:2 YUV (YUY2, UYVY, YVYU) and of 10-bit I420_10LE and
+ * P010_10LE taken out into an 8-bit plane, and on luma computed from RGB frames
+ * (BT.601 weights), at any size and stride.
  *
  * Unless #GstLFTagDetect:overlay is set the pixels are not touched and the frame
  * is mapped read-only, so a frame shared with another branch of a tee is not
@@ -127,7 +129,8 @@ enum
 /* The detector's own parameters default to the library's (DetectorParams). */
 
 #define DETECT_FORMATS "{ GRAY8, I420, YV12, NV12, NV21, Y42B, Y444, RGB, BGR, " \
-    "RGBx, BGRx, xRGB, xBGR, RGBA, BGRA, ARGB, ABGR }"
+    "RGBx, BGRx, xRGB, xBGR, RGBA, BGRA, ARGB, ABGR, YUY2, UYVY, YVYU, I420_10LE, " \
+    "P010_10LE }"
 
 static GstStaticPadTemplate sink_template = GST_STATIC_PAD_TEMPLATE ("sink",
     GST_PAD_SINK,
@@ -227,8 +230,9 @@ struct Settings {
  * buffers are serialised). */
 struct State {
   std::optional<Camera> calibration;    /* start() */
-  cv::Mat1f luma_weights;               /* set_info(): RGB formats, per byte of a pixel */
-  cv::Mat1b luma;                       /* RGB formats: reused */
+  cv::Mat1f luma_weights;               /* set_info(): packed formats, per byte of a pixel */
+  double luma_scale = 0;                /* set_info(): 16-bit luma planes, to 8 bits */
+  cv::Mat1b luma;                       /* packed and 16-bit formats: reused */
   cv::Mat4b layer;                      /* the overlay, transparent BGRA: reused */
   cv::Mat1b alpha;                      /* the layer's alpha, where it is searched */
   std::optional<lftag::Detector> detector;
@@ -291,15 +295,36 @@ detector_params (const DetectorSettings & s, const Camera & camera)
   return p;
 }
 
-/* The BT.601 luma of packed RGB as one weight per byte of a pixel (0 for x and A). */
+/* The luma of a packed format as one weight per byte of a pixel: BT.601 for RGB (0 for
+ * x and A), 1 for the Y byte of packed 4:2:2 YUV (a pixel is then two bytes, Y and U or
+ * V). Empty for formats whose plane 0 is the luma itself. */
 cv::Mat1f
 luma_weights (const GstVideoFormatInfo * finfo)
 {
-  const float rgb[3] = {0.299f, 0.587f, 0.114f};
-  cv::Mat1f weights (1, GST_VIDEO_FORMAT_INFO_PSTRIDE (finfo, 0), 0.0f);
-  for (int c = 0; c < 3; ++c)
-    weights (0, GST_VIDEO_FORMAT_INFO_POFFSET (finfo, c)) = rgb[c];
-  return weights;
+  if (GST_VIDEO_FORMAT_INFO_IS_RGB (finfo)) {
+    const float rgb[3] = {0.299f, 0.587f, 0.114f};
+    cv::Mat1f weights (1, GST_VIDEO_FORMAT_INFO_PSTRIDE (finfo, 0), 0.0f);
+    for (int c = 0; c < 3; ++c)
+      weights (0, GST_VIDEO_FORMAT_INFO_POFFSET (finfo, c)) = rgb[c];
+    return weights;
+  }
+  if (GST_VIDEO_FORMAT_INFO_PSTRIDE (finfo, 0) == 2 && GST_VIDEO_FORMAT_INFO_DEPTH (finfo, 0) == 8) {
+    cv::Mat1f weights (1, 2, 0.0f);
+    weights (0, GST_VIDEO_FORMAT_INFO_POFFSET (finfo, 0)) = 1.0f;
+    return weights;
+  }
+  return {};
+}
+
+/* The factor from a 16-bit luma plane to 8 bits (10 significant bits, shifted up or
+ * not); 0 for 8-bit luma. */
+double
+luma_scale (const GstVideoFormatInfo * finfo)
+{
+  if (GST_VIDEO_FORMAT_INFO_DEPTH (finfo, 0) <= 8)
+    return 0;
+  const int bits = GST_VIDEO_FORMAT_INFO_DEPTH (finfo, 0) + GST_VIDEO_FORMAT_INFO_SHIFT (finfo, 0);
+  return 1.0 / double (1 << (bits - 8));
 }
 
 /* The pixels of a detection: its outer corners' bounding box, clipped to the frame. */
@@ -761,9 +786,8 @@ gst_lftag_detect_set_info (GstVideoFilter * filter, GstCaps *, GstVideoInfo * in
   }
 
   st.detector.reset ();         /* its camera is the frame's */
-  st.luma_weights.release ();
-  if (GST_VIDEO_INFO_IS_RGB (in_info))
-    st.luma_weights = luma_weights (in_info->finfo);
+  st.luma_weights = luma_weights (in_info->finfo);
+  st.luma_scale = luma_scale (in_info->finfo);
   st.luma.release ();
   st.layer.release ();
   return TRUE;
@@ -810,6 +834,12 @@ gst_lftag_detect_luma (State & st, GstVideoFrame * frame)
   auto *data = static_cast < std::uint8_t * >(GST_VIDEO_FRAME_PLANE_DATA (frame, 0));
   const int stride = GST_VIDEO_FRAME_PLANE_STRIDE (frame, 0);
 
+  if (st.luma_scale > 0) {
+    /* Only the luma plane is converted, little-endian as the formats say. */
+    const cv::Mat wide (height, width, CV_16UC1, data, std::size_t (stride));
+    wide.convertTo (st.luma, CV_8U, st.luma_scale);
+    return lftag::ImageView (st.luma);
+  }
   if (st.luma_weights.empty ())
     return lftag::ImageView (data, width, height, stride);
   const cv::Mat packed (height, width, CV_8UC (st.luma_weights.cols), data,

@@ -232,8 +232,10 @@ GST_END_TEST;
 // ---------------------------------------------------------------------------
 // Formats, sizes, strides
 
-const char* const kFormats[] = {"GRAY8", "I420", "YV12", "NV12", "NV21", "Y42B", "Y444", "RGB", "BGR",
-                                "RGBx",  "BGRx", "xRGB", "xBGR", "RGBA", "BGRA", "ARGB", "ABGR"};
+const char* const kFormats[] = {"GRAY8", "I420", "YV12", "NV12", "NV21",      "Y42B",     "Y444",
+                                "RGB",   "BGR",  "RGBx", "BGRx", "xRGB",      "xBGR",     "RGBA",
+                                "BGRA",  "ARGB", "ABGR", "YUY2", "UYVY",      "YVYU",     "I420_10LE",
+                                "P010_10LE"};
 
 // The source's frame in each format gives the detections of its GRAY8 frame. RGB
 // carries the grey levels exactly; YUV squeezes them into video range (16..235).
@@ -269,7 +271,7 @@ GST_START_TEST(test_every_format_hd_with_overlay) {
 GST_END_TEST;
 
 GST_START_TEST(test_odd_sizes) {
-  const std::vector<const char*> formats{"I420", "NV21", "Y42B", "RGB", "xBGR", "BGRA"};
+  const std::vector<const char*> formats{"I420", "NV21", "Y42B", "RGB", "xBGR", "BGRA", "YUY2", "P010_10LE"};
   for (const char* properties : {"", "overlay=outline+id+axes"}) {
     check_formats(1, 1, formats, properties, 0);
     check_formats(17, 13, formats, properties, 0);
@@ -281,7 +283,7 @@ GST_END_TEST;
 // Frames whose rows (and planes) are padded, as a GstVideoMeta announces: the same
 // detections, and with the overlay on, the padding is left alone.
 GST_START_TEST(test_padded_strides) {
-  for (const char* format : {"GRAY8", "I420", "NV12", "Y444", "RGB", "BGRx", "ARGB"}) {
+  for (const char* format : {"GRAY8", "I420", "NV12", "Y444", "RGB", "BGRx", "ARGB", "UYVY", "I420_10LE"}) {
     Frames frames;
     pull_frames(frames, "lftagtestsrc num-buffers=1 count=3 seed=2",
                 (std::string("video/x-raw,width=643,height=481,format=") + format).c_str(), 1);
