@@ -1,60 +1,25 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 #include "lftag/camera.hpp"
 
+#include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <stdexcept>
+#include <system_error>
 
 #include <opencv2/calib3d.hpp>
+
+#include "calibration_file.hpp"
 
 namespace lftag {
 namespace {
 
-// Reads the first present key of `names` as a matrix; empty if none is present.
-cv::Mat read_matrix(const cv::FileStorage& fs, std::initializer_list<const char*> names) {
-  for (const char* name : names) {
-    cv::FileNode node = fs[name];
-    if (node.empty()) continue;
-    cv::Mat m;
-    node >> m;
-    if (m.empty()) throw std::runtime_error(std::string("'") + name + "' is not a matrix");
-    m.convertTo(m, CV_64F);
-    return m;
-  }
-  return {};
-}
-
-int read_int(const cv::FileStorage& fs, const char* name) {
-  cv::FileNode node = fs[name];
-  if (node.empty()) return 0;
-  if (!node.isInt() && !node.isReal()) throw std::runtime_error(std::string("'") + name + "' is not a number");
-  return int(node.real());
-}
-
-Camera from_storage(const cv::FileStorage& fs) {
-  const cv::Mat k = read_matrix(fs, {"camera_matrix", "cameraMatrix"});
-  if (k.empty())
-    throw std::runtime_error("no 'camera_matrix' (or 'cameraMatrix') entry");
-  if (k.rows != 3 || k.cols != 3)
-    throw std::runtime_error("the camera matrix is " + std::to_string(k.rows) + "x" +
-                             std::to_string(k.cols) + ", expected 3x3");
-  Camera cam;
-  cam.fx = k.at<double>(0, 0);
-  cam.fy = k.at<double>(1, 1);
-  cam.cx = k.at<double>(0, 2);
-  cam.cy = k.at<double>(1, 2);
-  const cv::Mat d = read_matrix(fs, {"distortion_coefficients", "distCoeffs"});
-  if (!d.empty()) {
-    if (d.total() != 4 && d.total() != 5 && d.total() != 8)
-      throw std::runtime_error("the distortion has " + std::to_string(d.total()) +
-                               " coefficients, expected 4, 5 or 8 (k1 k2 p1 p2 [k3 [k4 k5 k6]])");
-    cam.distortion.assign(d.ptr<double>(), d.ptr<double>() + d.total());
-  }
-  cam.width = read_int(fs, "image_width");
-  cam.height = read_int(fs, "image_height");
-  cam.calibrated = true;
-  cam.validate();
-  return cam;
+// A number for a message, whatever the C locale says about decimal points.
+std::string show(double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 6);
+  return std::string(buf, r.ptr);
 }
 
 }  // namespace
@@ -74,26 +39,29 @@ Camera Camera::pinhole(double fx, double fy, double cx, double cy, int width, in
 }
 
 Camera Camera::load(const std::string& path) {
-  std::ifstream probe(path);
-  if (!probe) throw std::runtime_error("calibration file '" + path + "' cannot be opened");
+  const std::string name = "calibration file '" + path + "'";
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error)) throw std::runtime_error(name + " is a directory, expected a file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error(name + " cannot be opened");
+  // One byte more than the limit tells a file that is too big (or endless) from one that fits.
+  std::string text(detail::kMaxCalibrationBytes + 1, '\0');
+  in.read(text.data(), std::streamsize(text.size()));
+  if (in.bad()) throw std::runtime_error(name + " cannot be read");
+  text.resize(std::size_t(in.gcount()));
+  if (text.size() > detail::kMaxCalibrationBytes)
+    throw std::runtime_error(name + " is larger than the " + std::to_string(detail::kMaxCalibrationBytes) +
+                             " bytes (1 MiB) a calibration file may have");
   try {
-    cv::FileStorage fs(path, cv::FileStorage::READ);
-    if (!fs.isOpened()) throw std::runtime_error("it is not an OpenCV YAML, XML or JSON file");
-    return from_storage(fs);
-  } catch (const cv::Exception& e) {
-    throw std::runtime_error("calibration file '" + path + "' cannot be parsed: " + e.err);
+    return detail::read_calibration(text);
   } catch (const std::exception& e) {
-    throw std::runtime_error("calibration file '" + path + "': " + e.what());
+    throw std::runtime_error(name + ": " + e.what());
   }
 }
 
 Camera Camera::parse(const std::string& text, const std::string& source) {
   try {
-    cv::FileStorage fs(text, cv::FileStorage::READ | cv::FileStorage::MEMORY);
-    if (!fs.isOpened()) throw std::runtime_error("it is not OpenCV YAML, XML or JSON");
-    return from_storage(fs);
-  } catch (const cv::Exception& e) {
-    throw std::runtime_error(source + " cannot be parsed: " + e.err);
+    return detail::read_calibration(text);
   } catch (const std::exception& e) {
     throw std::runtime_error(source + ": " + e.what());
   }
@@ -160,14 +128,28 @@ std::vector<cv::Point2d> Camera::project(const std::vector<cv::Point3d>& points,
 }
 
 void Camera::validate() const {
-  auto finite = [](double v) { return std::isfinite(v); };
-  if (!(finite(fx) && finite(fy) && fx > 0 && fy > 0))
-    throw std::invalid_argument("focal lengths must be positive (fx = " + std::to_string(fx) +
-                                ", fy = " + std::to_string(fy) + ")");
-  if (!finite(cx) || !finite(cy)) throw std::invalid_argument("principal point is not finite");
-  if (width < 0 || height < 0) throw std::invalid_argument("image size must not be negative");
-  for (double d : distortion)
-    if (!finite(d)) throw std::invalid_argument("distortion coefficients must be finite");
+  auto in = [](double v, double lo, double hi) { return v >= lo && v <= hi; };  // false for NaN
+  if (!in(fx, kMinFocal, kMaxFocal) || !in(fy, kMinFocal, kMaxFocal))
+    throw std::invalid_argument("the focal lengths (fx = " + show(fx) + ", fy = " + show(fy) +
+                                ") are out of range, expected " + show(kMinFocal) + " to " + show(kMaxFocal) +
+                                " pixels");
+  if (!in(cx, -kMaxPrincipal, kMaxPrincipal) || !in(cy, -kMaxPrincipal, kMaxPrincipal))
+    throw std::invalid_argument("the principal point (cx = " + show(cx) + ", cy = " + show(cy) +
+                                ") is out of range, expected finite numbers from " + show(-kMaxPrincipal) + " to " +
+                                show(kMaxPrincipal) + " pixels");
+  if (width < 0 || height < 0 || width > kMaxImageSide || height > kMaxImageSide)
+    throw std::invalid_argument("the image size " + std::to_string(width) + "x" + std::to_string(height) +
+                                " is out of range, expected 0 (unknown) to " + std::to_string(kMaxImageSide) +
+                                " pixels a side");
+  const std::size_t n = distortion.size();
+  if (n != 0 && n != 4 && n != 5 && n != 8)
+    throw std::invalid_argument("there are " + std::to_string(n) +
+                                " distortion coefficients, expected none, 4, 5 or 8 (k1 k2 p1 p2 [k3 [k4 k5 k6]])");
+  for (std::size_t i = 0; i < n; ++i)
+    if (!in(distortion[i], -kMaxDistortion, kMaxDistortion))
+      throw std::invalid_argument("distortion coefficient " + std::to_string(i + 1) + " (" + show(distortion[i]) +
+                                  ") is out of range, expected finite numbers from " + show(-kMaxDistortion) +
+                                  " to " + show(kMaxDistortion));
 }
 
 }  // namespace lftag

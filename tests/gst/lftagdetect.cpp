@@ -903,6 +903,14 @@ GST_START_TEST(test_bad_calibration_files) {
                {"no_matrix.yml", "camera_matrix"}, GST_RESOURCE_ERROR);
   expect_error(source + "lftagdetect name=d calibration-file=" + data + "/wrong_shape.yml ! fakesink",
                {"wrong_shape.yml"}, GST_RESOURCE_ERROR);
+  // Hostile files (they crashed, hung or exhausted OpenCV's parser) fail the state change
+  // with a message naming the file and the problem.
+  expect_error(source + "lftagdetect name=d calibration-file=" + data + "/nul_byte.xml ! fakesink",
+               {data + "/nul_byte.xml", "NUL byte"}, GST_RESOURCE_ERROR);
+  expect_error(source + "lftagdetect name=d calibration-file=" + data + "/hangs_opencv.yml ! fakesink",
+               {data + "/hangs_opencv.yml", "not valid YAML"}, GST_RESOURCE_ERROR);
+  expect_error(source + "lftagdetect name=d calibration-file=" + data + "/huge_matrix.yml ! fakesink",
+               {data + "/huge_matrix.yml", "expected 3x3"}, GST_RESOURCE_ERROR);
   // A calibration of 640x480 frames cannot describe 16:9 ones.
   expect_error(source + "video/x-raw,width=1280,height=720 ! lftagdetect name=d calibration-file=" + data +
                    "/opencv_sample.yml ! fakesink",

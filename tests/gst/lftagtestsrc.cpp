@@ -593,6 +593,7 @@ GST_START_TEST(test_bad_settings_fail_the_start)
                resource);
   expect_error("lftagtestsrc calibration-file=" + data + "/malformed.yml ! fakesink", "malformed.yml", resource);
   expect_error("lftagtestsrc calibration-file=" + data + "/no_matrix.yml ! fakesink", "camera_matrix", resource);
+  expect_error("lftagtestsrc calibration-file=" + data + "/nul_byte.xml ! fakesink", "nul_byte.xml", resource);
   expect_error("lftagtestsrc background=photo ! fakesink", "background-location", resource);
   expect_error("lftagtestsrc background=photo background-location=/nonexistent/street.jpg ! fakesink",
                "/nonexistent/street.jpg", resource);

@@ -244,6 +244,13 @@ TEST(Cli, DetectRejectsBadConfiguration) {
   r = run("detect --calibration /nonexistent.yml x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("/nonexistent.yml"), std::string::npos) << r.output;
+  // A hostile calibration file (OpenCV's parser crashed on a NUL byte) is one line naming it.
+  const std::string hostile = kTmp + "/hostile.xml";
+  std::ofstream(hostile, std::ios::binary) << std::string("<?xml version=\"1.0\"?>\n<opencv_storage a=\"\0\">", 44);
+  r = run("detect --calibration " + hostile + " x.png");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_EQ(r.output, "lftag detect: calibration file '" + hostile +
+                          "': it has a NUL byte at offset 41, expected text (OpenCV YAML, XML or JSON)\n");
   r = run("detect --threshold-window 1 x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("--threshold-window"), std::string::npos) << r.output;

@@ -22,14 +22,24 @@ struct Camera {
   static Camera default_for(int width, int height);
   static Camera pinhole(double fx, double fy, double cx, double cy, int width = 0, int height = 0);
 
+  // The ranges validate() accepts, and so calibration files too.
+  static constexpr double kMinFocal = 1e-3, kMaxFocal = 1e7;  // fx, fy, pixels
+  static constexpr double kMaxPrincipal = 1e7;                // |cx|, |cy|, pixels
+  static constexpr double kMaxDistortion = 1e4;               // |each coefficient|
+  static constexpr int kMaxImageSide = 65536;                 // width, height (0: unknown)
+
   // Reads an OpenCV FileStorage file (YAML, XML or JSON) with `camera_matrix` and
   // `distortion_coefficients` (OpenCV's calibration samples) or `cameraMatrix` and
   // `distCoeffs` (GStreamer's cameracalibrate), plus optional `image_width`/`image_height`.
-  // Throws std::runtime_error naming the file and what is wrong with it.
+  // The file is untrusted input: it is parsed with libyaml, libxml2 or nlohmann-json
+  // under limits (at most 1 MiB, no YAML aliases, no XML DTD or entities, bounded
+  // nesting; README.md, "Calibration files"), never with cv::FileStorage, and its
+  // values must pass validate(). Throws std::runtime_error naming the file, what is
+  // wrong with it and what was expected.
   static Camera load(const std::string& path);
-  // Same, from FileStorage text in memory (`source` names it in messages).
+  // Same, from text in memory (`source` names it in messages).
   static Camera parse(const std::string& text, const std::string& source = "calibration");
-  // Writes the OpenCV calibration-sample format.
+  // Writes the OpenCV calibration-sample format (YAML, XML or JSON by the extension).
   void save(const std::string& path) const;
 
   // The camera for a frame of another size: intrinsics scale with the frame when the
@@ -46,7 +56,10 @@ struct Camera {
   std::vector<cv::Point2d> project(const std::vector<cv::Point3d>& points,
                                    const cv::Vec3d& rvec = {}, const cv::Vec3d& tvec = {}) const;
 
-  // Throws std::invalid_argument when the parameters cannot describe a camera.
+  // Throws std::invalid_argument when the parameters cannot describe a camera: fx, fy
+  // outside [kMinFocal, kMaxFocal], cx, cy outside +-kMaxPrincipal, width or height
+  // outside [0, kMaxImageSide], a distortion of other than 0, 4, 5 or 8 coefficients or
+  // one beyond +-kMaxDistortion; NaN and infinities everywhere.
   void validate() const;
 };
 

@@ -1,0 +1,25 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// The calibration-file reader behind Camera::load and Camera::parse. Calibration files are
+// user input: they are parsed here with libyaml, libxml2 and nlohmann-json under fixed
+// limits, never by OpenCV's cv::FileStorage (whose parser crashes, hangs or allocates
+// without bound on malformed input).
+#pragma once
+
+#include <cstddef>
+#include <string_view>
+
+#include "lftag/camera.hpp"
+
+namespace lftag::detail {
+
+// The limits of the reader (README.md, "Calibration files", says the same).
+inline constexpr std::size_t kMaxCalibrationBytes = 1 << 20;  // 1 MiB
+inline constexpr int kMaxCalibrationDepth = 32;               // nested mappings and sequences
+inline constexpr int kMaxEntryValues = 256;                   // scalars in one entry that is read
+
+// Reads OpenCV FileStorage text (YAML, XML or JSON, told apart by their first character).
+// Throws std::runtime_error saying what is wrong and what was expected (no file name: the
+// caller adds it).
+Camera read_calibration(std::string_view text);
+
+}  // namespace lftag::detail
