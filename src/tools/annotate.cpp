@@ -96,7 +96,7 @@ void vpx_setup(GstElement* e, const char* bits_per_pixel) {
   set(e, "target-bitrate", "0");
   set(e, "bits-per-pixel", bits_per_pixel);
   set(e, "deadline", "1");
-  set(e, "cpu-used", "4");
+  set(e, "cpu-used", "8");
   set(e, "max-quantizer", "44");
   set(e, "threads", std::to_string(std::max(1u, std::min(8u, g_get_num_processors()))));
 }
@@ -212,11 +212,13 @@ struct PartFile {
   std::string part() const { return path + ".part"; }
   // Creates NAME.part now, so that an unwritable place fails before any decoding.
   void check_writable() const {
+    if (path.empty()) return;
     FILE* f = std::fopen(part().c_str(), "w");
     if (!f) throw std::runtime_error("cannot write '" + path + "': " + g_strerror(errno));
     std::fclose(f);
   }
   void commit() const {
+    if (path.empty()) return;
     std::error_code error;
     fs::rename(part(), path, error);
     if (error) throw std::runtime_error("cannot write '" + path + "': " + error.message());
@@ -580,7 +582,7 @@ int Annotator::run() {
   if (!o_.jsonl.empty() && o_.jsonl != "-") jsonl_.path = o_.jsonl;
   try {
     video_.check_writable();
-    if (!jsonl_.path.empty()) jsonl_.check_writable();
+    jsonl_.check_writable();
     build();
   } catch (...) {
     video_.discard();
@@ -646,8 +648,8 @@ int Annotator::run() {
   }
   progress(true);
   try {
-    if (!video_.path.empty()) video_.commit();
-    if (!jsonl_.path.empty()) jsonl_.commit();
+    video_.commit();
+    jsonl_.commit();
   } catch (...) {
     video_.discard();
     jsonl_.discard();

@@ -40,8 +40,9 @@ def path(name):
 
 
 def annotate(*args, expect=0, env=None, stderr=subprocess.PIPE):
+    # In the work directory, where a stray file would show.
     result = subprocess.run([lftag, "annotate", *args], stdout=subprocess.PIPE, stderr=stderr, text=True,
-                            timeout=600, env=dict(os.environ, **(env or {})))
+                            timeout=600, env=dict(os.environ, **(env or {})), cwd=work)
     assert result.returncode == expect, (f"lftag annotate {' '.join(args)} exited {result.returncode}, not {expect}\n"
                                          f"{result.stdout}\n{result.stderr}")
     return result
@@ -169,6 +170,7 @@ def jsonl_to_stdout_without_video():
     result = annotate(recording(), "--jsonl", "-", "--quiet")
     check_jsonl([json.loads(line) for line in result.stdout.splitlines()])
     assert result.stderr == "", result.stderr
+    assert not [name for name in os.listdir(work) if name.endswith(".part")], os.listdir(work)
 
 
 @case
