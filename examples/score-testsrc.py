@@ -61,7 +61,7 @@ class Scorer:
             f"seed={args.seed} noise={args.noise} motion-blur={args.motion_blur} family={self.families[0].name} ! "
             f"video/x-raw,width={width},height={height} ! "
             f"lftagdetect name=detect families={args.families} fx={width} overlay=outline+id+axes "
-            f"message=false ! {sink}")
+            f"messages=none ! {sink}")
         if args.output:
             self.pipeline.get_by_name("out").set_property("location", args.output)
         self.source = self.pipeline.get_by_name("src")

@@ -27,13 +27,21 @@
  *   of the detection. GStreamer 1.22's videoconvert and videoscale keep the
  *   boxes (scaled) but drop the params.
  *
- * When #GstLFTagDetect:message is TRUE, a frame in which markers were found
- * also posts an element message "lftag" (shown by gst-launch-1.0 -m) with:
+ #GstLFTagDetect:messages says which frames post an element message "lftag"
+ * (shown by gst-launch-1.0 -m): every frame with markers (with-markers, the
+ * default), a frame whose set of markers differs from the frame before's
+ * (on-change, also when the last marker leaves), every frame (every-frame) or
+ * none. The message holds, in this order:
  *
  * - "timestamp" (#GstClockTime): the buffer's presentation timestamp
  * - "stream-time" (#GstClockTime): its stream time
  * - "running-time" (#GstClockTime): its running time
  * - "duration" (#GstClockTime): its duration
+ * - "ids" (#GstValueArray of strings): "3x3:6789", family and decimal id of each
+ *   marker, in the order of "detections"
+ * - "centers" (#GstValueArray of points): their centres, rounded to 0.25 px
+ * - "appeared", "vanished" (#GstValueArray of strings): ids not in the frame
+ *   before, and ids of the frame before that are gone (sorted)
  * - "width", "height" (#gint): the analysed frame
  * - "detections" (#GstValueArray of #GstStructure): as in the LFTagMeta
  *
@@ -87,6 +95,7 @@
 #include <lftag/detector.hpp>
 #include <lftag/draw.hpp>
 
+#include "detectmessages.h"
 #include "elementcamera.h"
 #include "lftagmeta.h"
 #include "propertystate.h"
@@ -107,6 +116,7 @@ enum
   PROP_DISTORTION,
   PROP_OVERLAY,
   PROP_MESSAGE,
+  PROP_MESSAGES,
   PROP_THRESHOLD_WINDOW,
   PROP_THRESHOLD_OFFSET,
   PROP_SECOND_LOOK,
@@ -124,7 +134,7 @@ enum
 #define DEFAULT_PROP_PRINCIPAL 0.0
 #define DEFAULT_PROP_DISTORTION nullptr
 #define DEFAULT_PROP_OVERLAY 0
-#define DEFAULT_PROP_MESSAGE TRUE
+#define DEFAULT_PROP_MESSAGES GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS
 #define DEFAULT_PROP_LATE_FRAMES GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE
 /* The detector's own parameters default to the library's (DetectorParams). */
 
@@ -210,8 +220,9 @@ struct Settings {
   std::string distortion_text;
   std::string calibration_file;
   bool tag_size_set = false;    /* a metric pose was asked for */
+  std::string families_error;   /* why the last families value was refused */
   guint overlay = DEFAULT_PROP_OVERLAY;
-  bool message = DEFAULT_PROP_MESSAGE;
+  GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
   GstLFTagDetectLateFrames late_frames = DEFAULT_PROP_LATE_FRAMES;
 
   Settings () {
@@ -238,6 +249,7 @@ struct State {
   std::optional<lftag::Detector> detector;
   DetectorSettings built, rejected;     /* the detector's settings; a set that failed */
   bool warned_uncalibrated = false;
+  lftag::gst::DetectMessages messages;
   guint64 analysed = 0, skipped = 0;    /* frames, for QoS messages */
 };
 
@@ -440,10 +452,17 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
           "(for example outline+id+axes). Drawing writes to the frame (a copy when "
           "it is shared); with nothing to draw the pixels are left untouched",
           GST_TYPE_LFTAG_DETECT_OVERLAY, DEFAULT_PROP_OVERLAY, playing));
+  g_object_class_install_property (gobject_class, PROP_MESSAGES,
+      g_param_spec_enum ("messages", "Messages",
+          "Which frames post an element message \"lftag\" (ids and centres, then "
+          "the full detections): with-markers, on-change (the set of ids changed), "
+          "every-frame or none",
+          GST_TYPE_LFTAG_DETECT_MESSAGES, DEFAULT_PROP_MESSAGES, playing));
   g_object_class_install_property (gobject_class, PROP_MESSAGE,
       g_param_spec_boolean ("message", "Message",
-          "Post an element message \"lftag\" for every frame with detections",
-          DEFAULT_PROP_MESSAGE, playing));
+          "Deprecated: use messages. TRUE: messages=with-markers (unless messages "
+          "already posts), FALSE: messages=none; reads TRUE unless messages=none",
+          TRUE, GParamFlags (playing | G_PARAM_DEPRECATED)));
   g_object_class_install_property (gobject_class, PROP_THRESHOLD_WINDOW,
       g_param_spec_int ("threshold-window", "Threshold window",
           "Side in pixels of the window whose mean grey level a pixel must be below "
@@ -508,6 +527,7 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
 
   gst_type_mark_as_plugin_api (GST_TYPE_LFTAG_DETECT_OVERLAY, GstPluginAPIFlags (0));
   gst_type_mark_as_plugin_api (GST_TYPE_LFTAG_DETECT_LATE_FRAMES, GstPluginAPIFlags (0));
+  gst_type_mark_as_plugin_api (GST_TYPE_LFTAG_DETECT_MESSAGES, GstPluginAPIFlags (0));
 
   /* So that applications find the meta by name as soon as the element exists. */
   lftag::gst::detection_meta_info ();
@@ -548,18 +568,27 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
   std::vector<Family> families;
   std::vector<double> distortion;
   const gchar *text = nullptr;
+  std::string families_text, families_error;
 
   /* Text is parsed outside the lock; bad text is refused and changes nothing. */
   switch (prop_id) {
     case PROP_FAMILIES:
+      /* "3x3, 4X4" is read as 3x3,4x4. A value that names no family is refused
+       * on the bus (a warning now, while playing; an error when the element
+       * starts, for a value set before it had a bus) and the families stay. */
       text = g_value_get_string (value);
       try {
         families = Family::parse_list (text ? text : DEFAULT_PROP_FAMILIES);
-        if (families.empty ())
-          throw std::invalid_argument ("no family given");
+        for (const Family & f : families)
+          families_text += (families_text.empty () ? "" : ",") + f.name ();
       } catch (const std::exception & e) {
-        g_warning ("%s: ignoring families \"%s\": %s", GST_OBJECT_NAME (self), text,
-            e.what ());
+        families_error = std::string ("\"") + text + "\": " + e.what ();
+        GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
+            ("Invalid families %s; the detector keeps its families.",
+                families_error.c_str ()), (nullptr));
+        GST_OBJECT_LOCK (self);
+        self->settings->families_error = families_error;
+        GST_OBJECT_UNLOCK (self);
         return;
       }
       break;
@@ -582,7 +611,8 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
   Settings & s = *self->settings;
   switch (prop_id) {
     case PROP_FAMILIES:
-      s.families_text = text ? text : DEFAULT_PROP_FAMILIES;
+      s.families_text = families_text;
+      s.families_error.clear ();
       s.detector.families = std::move (families);
       break;
     case PROP_TAG_SIZE:
@@ -612,7 +642,13 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
       s.overlay = g_value_get_flags (value);
       break;
     case PROP_MESSAGE:
-      s.message = g_value_get_boolean (value);
+      if (!g_value_get_boolean (value))
+        s.messages = GST_LFTAG_DETECT_MESSAGES_NONE;
+      else if (s.messages == GST_LFTAG_DETECT_MESSAGES_NONE)
+        s.messages = GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS;
+      break;
+    case PROP_MESSAGES:
+      s.messages = GstLFTagDetectMessages (g_value_get_enum (value));
       break;
     case PROP_LATE_FRAMES:
       s.late_frames = GstLFTagDetectLateFrames (g_value_get_enum (value));
@@ -685,7 +721,10 @@ gst_lftag_detect_get_property (GObject * object, guint prop_id, GValue * value,
       g_value_set_flags (value, s.overlay);
       break;
     case PROP_MESSAGE:
-      g_value_set_boolean (value, s.message);
+      g_value_set_boolean (value, s.messages != GST_LFTAG_DETECT_MESSAGES_NONE);
+      break;
+    case PROP_MESSAGES:
+      g_value_set_enum (value, s.messages);
       break;
     case PROP_LATE_FRAMES:
       g_value_set_enum (value, s.late_frames);
@@ -742,6 +781,12 @@ gst_lftag_detect_start (GstBaseTransform * trans)
   GST_OBJECT_LOCK (self);
   self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
   GST_OBJECT_UNLOCK (self);
+  st.messages.reset ();
+  if (!s.families_error.empty ()) {
+    GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS,
+        ("Invalid families %s.", s.families_error.c_str ()), (nullptr));
+    return FALSE;
+  }
   if (s.calibration_file.empty ())
     return TRUE;
 
@@ -893,27 +938,6 @@ gst_lftag_detect_add_metas (GstBuffer * buffer, const GstVideoInfo * info,
     gst_structure_set_name (param, "lftag");
     gst_video_region_of_interest_meta_add_param (roi, param);
   }
-}
-
-static void
-gst_lftag_detect_post_message (GstLFTagDetect * self, GstBuffer * buffer,
-    const GstVideoInfo * info, const std::vector<Detection> & detections)
-{
-  const GstSegment *segment = &GST_BASE_TRANSFORM (self)->segment;
-  const GstClockTime pts = GST_BUFFER_PTS (buffer);
-
-  GstStructure *s = gst_structure_new ("lftag",
-      "timestamp", G_TYPE_UINT64, pts,
-      "stream-time", G_TYPE_UINT64,
-      gst_segment_to_stream_time (segment, GST_FORMAT_TIME, pts),
-      "running-time", G_TYPE_UINT64,
-      gst_segment_to_running_time (segment, GST_FORMAT_TIME, pts),
-      "duration", G_TYPE_UINT64, GST_BUFFER_DURATION (buffer),
-      "width", G_TYPE_INT, GST_VIDEO_INFO_WIDTH (info),
-      "height", G_TYPE_INT, GST_VIDEO_INFO_HEIGHT (info), nullptr);
-  lftag::gst::set_detections (s, LFTAG_META_FIELD_DETECTIONS, detections);
-  gst_element_post_message (GST_ELEMENT (self),
-      gst_message_new_element (GST_OBJECT (self), s));
 }
 
 /* Where the layer was drawn on: near the marker (`near`) if the drawing stays
@@ -1145,7 +1169,9 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
     }
   }
 
-  if (s.message && !detections.empty ())
-    gst_lftag_detect_post_message (self, buffer, info, detections);
+  if (GstMessage * message = st.messages.frame (GST_OBJECT (self), s.messages,
+          GST_BASE_TRANSFORM (self)->segment, buffer, GST_VIDEO_INFO_WIDTH (info),
+          GST_VIDEO_INFO_HEIGHT (info), detections))
+    gst_element_post_message (GST_ELEMENT (self), message);
   return GST_FLOW_OK;
 }

@@ -49,6 +49,8 @@
  *   calibrated         gboolean     pose from a real calibration (else from the
  *                                   default camera: decoding is exact, metric pose is not)
  *   decode-error       gdouble      decoding error metric, lower is better
+ *   worst-cell         gdouble      largest offset of a square from its decoded
+ *                                   position, marker units (0.35 is the limit)
  *   edge-score         gdouble      mean gradient along the inner border edge
  *   reprojection-error gdouble      RMS of the final pose over the centroids, pixels
  * Truth only:
@@ -94,6 +96,7 @@ G_BEGIN_DECLS
 #define LFTAG_FIELD_TAG_SIZE "tag-size"
 #define LFTAG_FIELD_CALIBRATED "calibrated"
 #define LFTAG_FIELD_DECODE_ERROR "decode-error"
+#define LFTAG_FIELD_WORST_CELL "worst-cell"
 #define LFTAG_FIELD_EDGE_SCORE "edge-score"
 #define LFTAG_FIELD_REPROJECTION_ERROR "reprojection-error"
 #define LFTAG_FIELD_CENTERS "centers"

@@ -232,6 +232,7 @@ GstStructure* detection_structure(const Detection& d) {
   gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, d.tag_size,
                     LFTAG_FIELD_CALIBRATED, G_TYPE_BOOLEAN, gboolean(d.calibrated),
                     LFTAG_FIELD_DECODE_ERROR, G_TYPE_DOUBLE, d.decode_error,
+                    LFTAG_FIELD_WORST_CELL, G_TYPE_DOUBLE, d.worst_cell,
                     LFTAG_FIELD_EDGE_SCORE, G_TYPE_DOUBLE, d.edge_score,
                     LFTAG_FIELD_REPROJECTION_ERROR, G_TYPE_DOUBLE, d.reprojection_error, nullptr);
   return s;
@@ -294,6 +295,8 @@ Detection detection_from_structure(const GstStructure* s) {
   d.tag_size = get_double(s, LFTAG_FIELD_TAG_SIZE);
   d.calibrated = get_boolean(s, LFTAG_FIELD_CALIBRATED);
   d.decode_error = get_double(s, LFTAG_FIELD_DECODE_ERROR);
+  // Optional: structures from before it was added read as 0.
+  if (!gst_structure_get_double(s, LFTAG_FIELD_WORST_CELL, &d.worst_cell)) d.worst_cell = 0;
   d.edge_score = get_double(s, LFTAG_FIELD_EDGE_SCORE);
   d.reprojection_error = get_double(s, LFTAG_FIELD_REPROJECTION_ERROR);
   return d;

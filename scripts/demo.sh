@@ -30,9 +30,22 @@ for m in truth["markers"]:
           + ", ".join(f"({x:.1f}, {y:.1f})" for x, y in m["keypoints"]))
 PY
 
-echo "== GStreamer: lftagtestsrc ! lftagdetect overlay=outline+id+axes ! vp8enc ! webmmux"
+echo "== GStreamer: lftagtestsrc ! lftagdetect"
 echo "   six moving markers at 1280x720 with noise and motion blur, 100 frames of each of"
 echo "   3x3, 4x4 and 6x6; every detection is checked against the truth on its frame"
-"$python" "$root/examples/score-testsrc.py" --families 3x3,4x4,6x6 --frames 100 --count 6 --size 1280x720 \
-  --output "$out/annotated.webm"
-echo "Wrote $(ls "$out" | wc -l) files to $out (the annotated video is annotated.webm)"
+"$python" "$root/examples/score-testsrc.py" --families 3x3,4x4,6x6 --frames 100 --count 6 --size 1280x720
+
+echo "== lftag annotate: a recording, annotated"
+echo "   ten seconds of four 3x3 markers over a photo, with noise and motion blur, recorded as"
+echo "   H.264 in MP4 (recording.mp4), then outlined and labelled into annotated.mp4, with the"
+echo "   detections of every frame in detections.jsonl"
+rm -f "$out/recording.mp4"
+gst-launch-1.0 -q -e lftagtestsrc num-buffers=300 count=4 noise=2 motion-blur=0.3 background=photo \
+  background-location=/usr/share/doc/opencv-doc/examples/data/building.jpg \
+  ! video/x-raw,width=1280,height=720 ! videoconvert ! x264enc speed-preset=veryfast ! mp4mux \
+  ! filesink location="$out/recording.mp4"
+"$lftag" annotate "$out/recording.mp4" --output "$out/annotated.mp4" --jsonl "$out/detections.jsonl"
+
+echo "== lftag annotate: a real recording (opencv-doc's vtest.avi, MPEG-4 part 2; no markers in it)"
+"$lftag" annotate /usr/share/doc/opencv-doc/examples/data/vtest.avi --jsonl "$out/vtest.jsonl"
+echo "Wrote $(ls "$out" | wc -l) files to $out (the annotated video is annotated.mp4)"

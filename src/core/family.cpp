@@ -13,10 +13,14 @@ Family::Family(int n) : n_(n) {
 }
 
 Family Family::parse(std::string_view name) {
-  const std::string text(name);
-  if (text.size() == 3 && text[1] == 'x' && text[0] == text[2] && text[0] >= '2' && text[0] <= '8')
+  // The obvious spellings too: " 4x4" (after a comma and a space) and "4X4".
+  std::string_view text = name;
+  while (!text.empty() && (text.front() == ' ' || text.front() == '\t')) text.remove_prefix(1);
+  while (!text.empty() && (text.back() == ' ' || text.back() == '\t')) text.remove_suffix(1);
+  if (text.size() == 3 && (text[1] == 'x' || text[1] == 'X') && text[0] == text[2] && text[0] >= '2' &&
+      text[0] <= '8')
     return Family(text[0] - '0');
-  throw std::invalid_argument("unknown family '" + text +
+  throw std::invalid_argument("unknown family '" + std::string(name) +
                               "': expected one of 2x2, 3x3, 4x4, 5x5, 6x6, 7x7, 8x8");
 }
 

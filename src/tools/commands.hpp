@@ -23,8 +23,21 @@ inline CLI::Validator finite_in(double lo, double hi) {
       "NUMBER in [" + CLI::detail::to_string(lo) + ", " + CLI::detail::to_string(hi) + "]");
 }
 
+// The detector's options, the same in `lftag detect` and `lftag annotate`.
+struct DetectorOptions {
+  std::string families = "3x3,4x4", calibration;
+  double fx = NAN, fy = NAN, cx = NAN, cy = NAN, tag_size = 0.1;
+  int window = 16, offset = 4;
+};
+// Adds --family, --fx, --fy, --cx, --cy, --calibration, --tag-size, --threshold-window and
+// --threshold-offset to `cmd`, stored in `options` (which must outlive the parse).
+void add_detector_options(CLI::App* cmd, DetectorOptions& options);
+
 void add_generate_command(CLI::App& app, int& status);
 void add_render_command(CLI::App& app, int& status);
 void add_detect_command(CLI::App& app, int& status);
+#ifdef LFTAG_WITH_GST
+void add_annotate_command(CLI::App& app, int& status);
+#endif
 
 }  // namespace lftag::tools

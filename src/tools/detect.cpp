@@ -17,22 +17,6 @@
 namespace lftag::tools {
 namespace {
 
-nlohmann::json detection_json(const Detection& d) {
-  return {{"family", d.family.name()},
-          {"id", id_json(d.id)},
-          {"id_hex", d.id.to_hex()},
-          {"keypoints", points_json({d.keypoints.begin(), d.keypoints.end()})},
-          {"center", {d.center.x, d.center.y}},
-          {"corners", points_json({d.corners.begin(), d.corners.end()})},
-          {"centroids", points_json(d.centroids)},
-          {"pose", {{"rvec", vec_json(d.rvec)}, {"tvec", vec_json(d.tvec)}, {"calibrated", d.calibrated},
-                    {"tag_size", d.tag_size}}},
-          {"decode_error", d.decode_error},
-          {"worst_cell", d.worst_cell},
-          {"edge_score", d.edge_score},
-          {"reprojection_error", d.reprojection_error}};
-}
-
 nlohmann::json stats_json(const DetectionStats& s) {
   return {{"funnel",
            {{"regions", s.regions}, {"topology", s.topology}, {"area", s.area}, {"geometry", s.geometry},
@@ -65,32 +49,34 @@ nlohmann::json verdict_json(const CandidateVerdict& v) {
 
 }  // namespace
 
+void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
+  cmd->add_option("--family", o.families, "Families to detect, comma-separated (default 3x3,4x4)");
+  cmd->add_option("--fx", o.fx, "Focal length in pixels (x)")->check(finite_in(1e-3, 1e7));
+  cmd->add_option("--fy", o.fy, "Focal length in pixels (y; default fx)")->check(finite_in(1e-3, 1e7));
+  cmd->add_option("--cx", o.cx, "Principal point x (default: image centre)")->check(finite_in(-1e7, 1e7));
+  cmd->add_option("--cy", o.cy, "Principal point y (default: image centre)")->check(finite_in(-1e7, 1e7));
+  cmd->add_option("--calibration", o.calibration,
+                  "OpenCV calibration file (YAML/XML/JSON: camera_matrix + distortion_coefficients, or "
+                  "cameraMatrix + distCoeffs). Without a camera, poses assume fx = image width and are "
+                  "marked \"calibrated\": false");
+  cmd->add_option("--tag-size", o.tag_size, "Outer edge of the black border in metres (default 0.1)")
+      ->check(finite_in(1e-6, 1e3));
+  cmd->add_option("--threshold-window", o.window, "Side of the mean window for binarisation (default 16)")
+      ->check(CLI::Range(2, 1024));
+  cmd->add_option("--threshold-offset", o.offset, "Grey levels below the mean for black (default 4)")
+      ->check(CLI::Range(0, 255));
+}
+
 void add_detect_command(CLI::App& app, int& status) {
-  struct Options {
+  struct Options : DetectorOptions {
     std::vector<std::string> images;
-    std::string families = "3x3,4x4", calibration, debug_dir;
-    double fx = NAN, fy = NAN, cx = NAN, cy = NAN, tag_size = 0.1;
-    int window = 16, offset = 4;
+    std::string debug_dir;
     bool stats = false, why = false;
   };
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("detect", "Detect markers in images; prints one JSON object per image (JSON Lines).");
   cmd->add_option("images", opt->images, "Image files (PNG, JPEG and every format OpenCV reads)")->required();
-  cmd->add_option("--family", opt->families, "Families to detect, comma-separated (default 3x3,4x4)");
-  cmd->add_option("--fx", opt->fx, "Focal length in pixels (x)")->check(finite_in(1e-3, 1e7));
-  cmd->add_option("--fy", opt->fy, "Focal length in pixels (y; default fx)")->check(finite_in(1e-3, 1e7));
-  cmd->add_option("--cx", opt->cx, "Principal point x (default: image centre)")->check(finite_in(-1e7, 1e7));
-  cmd->add_option("--cy", opt->cy, "Principal point y (default: image centre)")->check(finite_in(-1e7, 1e7));
-  cmd->add_option("--calibration", opt->calibration,
-                  "OpenCV calibration file (YAML/XML/JSON: camera_matrix + distortion_coefficients, or "
-                  "cameraMatrix + distCoeffs). Without a camera, poses assume fx = image width and are "
-                  "marked \"calibrated\": false");
-  cmd->add_option("--tag-size", opt->tag_size, "Outer edge of the black border in metres (default 0.1)")
-      ->check(finite_in(1e-6, 1e3));
-  cmd->add_option("--threshold-window", opt->window, "Side of the mean window for binarisation (default 16)")
-      ->check(CLI::Range(2, 1024));
-  cmd->add_option("--threshold-offset", opt->offset, "Grey levels below the mean for black (default 4)")
-      ->check(CLI::Range(0, 255));
+  add_detector_options(cmd, *opt);
   cmd->add_flag("--stats", opt->stats, "Add the candidate funnel and per-stage times to each object");
   cmd->add_flag("--why", opt->why,
                 "Add \"candidates\": every topological candidate with the stage that stopped it (area, "

@@ -1,5 +1,7 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
-// JSON conventions of the command-line contract (SPEC 5).
+// JSON conventions of the command-line contract (SPEC 5), and the JSON of one detection:
+// what `lftag detect` prints, and what lftagpublish and `lftag annotate --jsonl` write.
+// Header-only (nlohmann/json), so the GStreamer plugin shares it with the tool.
 #pragma once
 
 #include <vector>
@@ -7,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "lftag/detector.hpp"
 #include "lftag/tag_id.hpp"
 
 namespace lftag::tools {
@@ -24,5 +27,22 @@ inline nlohmann::json points_json(const std::vector<cv::Point2d>& points) {
 }
 
 inline nlohmann::json vec_json(const cv::Vec3d& v) { return {v[0], v[1], v[2]}; }
+
+// One detection, as every JSON output of the project writes it (the README's schema).
+inline nlohmann::json detection_json(const Detection& d) {
+  return {{"family", d.family.name()},
+          {"id", id_json(d.id)},
+          {"id_hex", d.id.to_hex()},
+          {"keypoints", points_json({d.keypoints.begin(), d.keypoints.end()})},
+          {"center", {d.center.x, d.center.y}},
+          {"corners", points_json({d.corners.begin(), d.corners.end()})},
+          {"centroids", points_json(d.centroids)},
+          {"pose", {{"rvec", vec_json(d.rvec)}, {"tvec", vec_json(d.tvec)}, {"calibrated", d.calibrated},
+                    {"tag_size", d.tag_size}}},
+          {"decode_error", d.decode_error},
+          {"worst_cell", d.worst_cell},
+          {"edge_score", d.edge_score},
+          {"reprojection_error", d.reprojection_error}};
+}
 
 }  // namespace lftag::tools

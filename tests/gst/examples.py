@@ -1,12 +1,11 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: LGPL-2.1-or-later
-"""Runs every example in examples/ (the launch lines, annotate-video.py, read-meta.c,
-read-meta.py, score-testsrc.py) on short synthetic videos and checks what they write.
+"""Runs every example in examples/ (the launch lines, read-meta.c, read-meta.py,
+score-testsrc.py) on short synthetic videos and checks what they write.
 Reports each case as TAP.
 
     examples.py SOURCE_ROOT READ_META_EXECUTABLE WORK_DIR
 """
-import json
 import os
 import subprocess
 import sys
@@ -85,40 +84,6 @@ def launch_line_file_to_file():
     run(os.path.join(examples, "pipelines.sh"), "file-to-file", recording(), path("annotated.webm"))
     assert decoded_frames(path("annotated.webm")) == ((640, 480), 30)
     run(os.path.join(examples, "pipelines.sh"), "file-to-file", path("missing.webm"), path("x.webm"), expect=1)
-
-
-@case
-def annotate_video():
-    result = python("annotate-video.py", recording(), "--video", path("annotated.avi"), "--jsonl", path("a.jsonl"))
-    assert "100 %" in result.stderr and "30 frames" in result.stderr, result.stderr
-    assert decoded_frames(path("annotated.avi")) == ((640, 480), 30)
-    lines = [json.loads(line) for line in open(path("a.jsonl"))]
-    assert len(lines) == 30
-    for frame, line in enumerate(lines):
-        assert list(line)[:2] == ["timestamp", "time"] and line["frame"] == frame
-        # WebM keeps timestamps to the millisecond.
-        assert abs(line["timestamp"] - frame * Gst.SECOND / 30) <= Gst.MSECOND, line["timestamp"]
-        assert (line["width"], line["height"]) == (640, 480)
-        for d in line["detections"]:
-            assert d["family"] == "3x3" and d["id"] in (6789, 42), d
-            assert len(d["corners"]) == 4 and len(d["centroids"]) == 9 and len(d["pose"]["tvec"]) == 3
-            assert d["pose"]["calibrated"] is False
-    # Through VP8 at 640x480 both markers are found in (nearly) every frame.
-    found = sum(sorted(d["id"] for d in line["detections"]) == [42, 6789] for line in lines)
-    assert found >= 28, f"both markers in only {found} of 30 frames"
-
-
-@case
-def annotate_video_mistakes():
-    result = python("annotate-video.py", path("missing.mp4"), "--jsonl", path("m.jsonl"), expect=2)
-    assert "missing.mp4" in result.stderr, result.stderr
-    result = python("annotate-video.py", recording(), "--video", path("out.mp4"), expect=2)
-    assert ".webm" in result.stderr, result.stderr
-    result = python("annotate-video.py", recording(), "--jsonl", path("m.jsonl"), "--families", "9x9", expect=1)
-    assert "9x9" in result.stderr, result.stderr
-    # A file that is not a video: decodebin's error, and a failure.
-    result = python("annotate-video.py", os.path.join(examples, "read-meta.c"), "--jsonl", path("m.jsonl"), expect=1)
-    assert "annotate-video:" in result.stderr, result.stderr
 
 
 @case

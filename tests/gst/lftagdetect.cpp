@@ -13,6 +13,7 @@
 #include <gst/video/video.h>
 #include <opencv2/calib3d.hpp>
 
+#include "detectmessages.h"
 #include "lftagmeta.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
@@ -695,6 +696,114 @@ static std::size_t count_and_free(std::vector<GstMessage*> messages) {
   return messages.size();
 }
 
+// The messages of each mode for a scripted sequence of frames in which markers appear and
+// vanish, and the compact fields a reader of gst-launch-1.0 -m sees first.
+struct Posted {
+  std::vector<std::string> ids, appeared, vanished;
+  std::size_t detections = 0, centers = 0;
+};
+
+static std::vector<std::string> strings_of(const GstStructure* s, const char* field) {
+  const GValue* list = gst_structure_get_value(s, field);
+  fail_unless(list != nullptr && GST_VALUE_HOLDS_ARRAY(list), "no array '%s'", field);
+  std::vector<std::string> out;
+  for (guint i = 0; i < gst_value_array_get_size(list); ++i)
+    out.push_back(g_value_get_string(gst_value_array_get_value(list, i)));
+  return out;
+}
+
+static std::vector<Posted> messages_for(const std::string& properties) {
+  // 640x480 grey frames: none, both markers (42 and 6789), 6789 alone.
+  Frames both, one, none;
+  const char* caps = "video/x-raw,format=GRAY8,width=640,height=480";
+  pull_frames(both, "lftagtestsrc ids=6789,42", caps, 1);
+  pull_frames(one, "lftagtestsrc ids=6789", caps, 1);
+  pull_frames(none, "lftagtestsrc family=4x4", caps, 1);
+  GstBuffer* script[] = {none.buffers[0], both.buffers[0], both.buffers[0], one.buffers[0],
+                         one.buffers[0],  none.buffers[0], none.buffers[0], one.buffers[0]};
+
+  GstHarness* h = detector("families=3x3 " + properties, both.info);
+  GstBus* bus = gst_bus_new();
+  gst_element_set_bus(h->element, bus);
+  for (std::size_t i = 0; i < G_N_ELEMENTS(script); ++i) {
+    GstBuffer* in = gst_buffer_copy(script[i]);
+    GST_BUFFER_PTS(in) = gst_util_uint64_scale(i, GST_SECOND, 30);
+    gst_buffer_unref(gst_harness_push_and_pull(h, in));
+  }
+  std::vector<Posted> posted;
+  while (GstMessage* m = gst_bus_pop_filtered(bus, GST_MESSAGE_ELEMENT)) {
+    const GstStructure* s = gst_message_get_structure(m);
+    fail_unless(gst_structure_has_name(s, "lftag"));
+    Posted p;
+    p.ids = strings_of(s, "ids");
+    p.appeared = strings_of(s, "appeared");
+    p.vanished = strings_of(s, "vanished");
+    p.detections = gst_value_array_get_size(gst_structure_get_value(s, "detections"));
+    p.centers = gst_value_array_get_size(gst_structure_get_value(s, "centers"));
+    // The compact fields come before the full record.
+    fail_unless(gst_structure_nth_field_name(s, 4) == std::string("ids"));
+    fail_unless(gst_structure_nth_field_name(s, gst_structure_n_fields(s) - 1) == std::string("detections"));
+    posted.push_back(p);
+    gst_message_unref(m);
+  }
+  gst_element_set_bus(h->element, nullptr);
+  gst_object_unref(bus);
+  gst_harness_teardown(h);
+  return posted;
+}
+
+GST_START_TEST(test_message_modes) {
+  using Ids = std::vector<std::string>;
+  const Ids both = {"3x3:42", "3x3:6789"}, one = {"3x3:6789"}, nothing;
+  auto sorted = [](Ids ids) {
+    std::sort(ids.begin(), ids.end());
+    return ids;
+  };
+
+  fail_unless_equals_int(messages_for("messages=none").size(), 0);
+  fail_unless_equals_int(messages_for("message=false").size(), 0);
+
+  std::vector<Posted> posted = messages_for("");  // with-markers, the default
+  fail_unless_equals_int(posted.size(), 5);
+  fail_unless(sorted(posted[0].ids) == both && posted[2].ids == one);
+  fail_unless_equals_int(messages_for("messages=with-markers").size(), 5);
+
+  posted = messages_for("messages=every-frame");
+  fail_unless_equals_int(posted.size(), 8);
+  fail_unless(posted[0].ids.empty() && posted[0].detections == 0);
+
+  // none -> both -> both -> one -> one -> none -> none -> one: four changes.
+  posted = messages_for("messages=on-change");
+  fail_unless_equals_int(posted.size(), 4);
+  fail_unless(sorted(posted[0].ids) == both && posted[0].appeared == both && posted[0].vanished.empty());
+  fail_unless(posted[1].ids == one && posted[1].appeared.empty() && posted[1].vanished == Ids{"3x3:42"});
+  fail_unless(posted[2].ids.empty() && posted[2].vanished == one && posted[2].detections == 0);
+  fail_unless(posted[3].ids == one && posted[3].appeared == one);
+  for (const Posted& p : posted) fail_unless(p.centers == p.ids.size() && p.detections == p.ids.size());
+}
+GST_END_TEST;
+
+// The old boolean still works: FALSE is none, TRUE brings back with-markers.
+GST_START_TEST(test_message_property_compatible) {
+  GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
+  gint mode;
+  gboolean message;
+  g_object_get(e, "messages", &mode, "message", &message, nullptr);
+  fail_unless(mode == GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS && message);
+  g_object_set(e, "message", FALSE, nullptr);
+  g_object_get(e, "messages", &mode, "message", &message, nullptr);
+  fail_unless(mode == GST_LFTAG_DETECT_MESSAGES_NONE && !message);
+  g_object_set(e, "message", TRUE, nullptr);
+  g_object_get(e, "messages", &mode, nullptr);
+  fail_unless(mode == GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS);
+  gst_util_set_object_arg(G_OBJECT(e), "messages", "on-change");
+  g_object_set(e, "message", TRUE, nullptr);  // already posting: unchanged
+  g_object_get(e, "messages", &mode, nullptr);
+  fail_unless(mode == GST_LFTAG_DETECT_MESSAGES_ON_CHANGE);
+  gst_object_unref(e);
+}
+GST_END_TEST;
+
 GST_START_TEST(test_message_switch_and_empty_frames) {
   fail_unless_equals_int(count_and_free(run_to_eos("lftagtestsrc num-buffers=5 ! lftagdetect message=false ! fakesink",
                                                    GST_MESSAGE_ELEMENT)),
@@ -758,10 +867,11 @@ GST_START_TEST(test_properties) {
   fail_if(second_look);
 
   g_object_set(e, "families", "2x2,8x8", "distortion", "-0.1,0.02,0,0,0.001", nullptr);
+  // Refused, changing nothing (on the bus: see test_bad_families).
+  g_object_set(e, "families", "9x9", nullptr);
+  g_object_set(e, "families", "3x3,", nullptr);
+  g_object_set(e, "families", "", nullptr);
   // Refused with a warning, changing nothing.
-  ASSERT_WARNING(g_object_set(e, "families", "9x9", nullptr));
-  ASSERT_WARNING(g_object_set(e, "families", "3x3,", nullptr));
-  ASSERT_WARNING(g_object_set(e, "families", "", nullptr));
   ASSERT_WARNING(g_object_set(e, "distortion", "0.1,0.2,0.3", nullptr));
   ASSERT_WARNING(g_object_set(e, "distortion", "0.1,x,0,0", nullptr));
   ASSERT_WARNING(g_object_set(e, "tag-size", 0.0, nullptr));
@@ -776,6 +886,11 @@ GST_START_TEST(test_properties) {
   g_object_get(e, "families", &families, "distortion", &distortion, nullptr);
   fail_unless_equals_string(families, "3x3,4x4");
   fail_unless(distortion == nullptr);
+  g_free(families);
+  // The obvious spellings are read as they are meant.
+  g_object_set(e, "families", "3x3, 4X4,6x6 ", nullptr);
+  g_object_get(e, "families", &families, nullptr);
+  fail_unless_equals_string(families, "3x3,4x4,6x6");
   g_free(families);
   gst_object_unref(e);
 }
@@ -1157,6 +1272,65 @@ GST_START_TEST(test_late_frames_in_a_live_pipeline) {
       fail_unless_equals_int(skipped_reported, 20 - count.analysed.load());
     }
   }
+// A families value that names no family: before the start, the start fails with an error
+// that names it; while playing, a warning names it and the detector keeps its families.
+GST_START_TEST(test_bad_families) {
+  for (const char* bad : {"9x9", "3x3,,4x4", "10x10"}) {
+    const std::string launch = std::string("lftagtestsrc num-buffers=3 ! lftagdetect name=d families=") + bad +
+                               " ! fakesink";
+    GstElement* pipeline = gst_parse_launch(launch.c_str(), nullptr);
+    fail_unless(pipeline != nullptr, "%s", launch.c_str());
+    GstBus* bus = gst_element_get_bus(pipeline);
+    fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) == GST_STATE_CHANGE_FAILURE, "%s started", bad);
+    GstMessage* m = gst_bus_pop_filtered(bus, GST_MESSAGE_ERROR);
+    fail_unless(m != nullptr, "no error for %s", bad);
+    GError* error = nullptr;
+    gst_message_parse_error(m, &error, nullptr);
+    fail_unless(std::string(error->message).find(std::string("\"") + bad + "\"") != std::string::npos, "%s",
+                error->message);
+    g_error_free(error);
+    gst_message_unref(m);
+    gst_element_set_state(pipeline, GST_STATE_NULL);
+    gst_object_unref(bus);
+    gst_object_unref(pipeline);
+  }
+
+  // A good value after a bad one clears it.
+  GstElement* pipeline =
+      gst_parse_launch("lftagtestsrc is-live=true num-buffers=30 ids=6789 ! lftagdetect name=d families=9x9 ! fakesink", nullptr);
+  GstElement* d = gst_bin_get_by_name(GST_BIN(pipeline), "d");
+  g_object_set(d, "families", "3x3", nullptr);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+  fail_unless(gst_element_get_state(pipeline, nullptr, nullptr, GST_CLOCK_TIME_NONE) != GST_STATE_CHANGE_FAILURE);
+  g_object_set(d, "families", "4X4, 12x12", nullptr);
+  GstMessage* m = gst_bus_timed_pop_filtered(bus, 10 * GST_SECOND, GST_MESSAGE_WARNING);
+  fail_unless(m != nullptr, "no warning while playing");
+  fail_unless_equals_string(GST_OBJECT_NAME(GST_MESSAGE_SRC(m)), "d");
+  GError* error = nullptr;
+  gst_message_parse_warning(m, &error, nullptr);
+  fail_unless(std::string(error->message).find("\"4X4, 12x12\"") != std::string::npos, "%s", error->message);
+  g_error_free(error);
+  gst_message_unref(m);
+  gchar* families = nullptr;
+  g_object_get(d, "families", &families, nullptr);
+  fail_unless_equals_string(families, "3x3");
+  g_free(families);
+  // The stream goes on, finding 3x3 markers.
+  std::size_t found = 0;
+  while (GstMessage* next = gst_bus_timed_pop_filtered(
+             bus, 60 * GST_SECOND, GstMessageType(GST_MESSAGE_ELEMENT | GST_MESSAGE_EOS | GST_MESSAGE_ERROR))) {
+    const bool end = GST_MESSAGE_TYPE(next) != GST_MESSAGE_ELEMENT;
+    fail_if(GST_MESSAGE_TYPE(next) == GST_MESSAGE_ERROR);
+    gst_message_unref(next);
+    if (end) break;
+    ++found;
+  }
+  fail_unless(found > 0);
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(d);
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
 }
 GST_END_TEST;
 
@@ -1179,9 +1353,12 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_region_metas);
   tcase_add_test(tc, test_region_clipped);
   tcase_add_test(tc, test_messages);
+  tcase_add_test(tc, test_message_modes);
+  tcase_add_test(tc, test_message_property_compatible);
   tcase_add_test(tc, test_message_switch_and_empty_frames);
   tcase_add_test(tc, test_message_times_after_seek);
   tcase_add_test(tc, test_properties);
+  tcase_add_test(tc, test_bad_families);
   tcase_add_test(tc, test_changes_while_playing);
   tcase_add_test(tc, test_changes_from_another_thread);
   tcase_add_test(tc, test_bad_calibration_files);

@@ -33,6 +33,7 @@ Detection make_detection(int n, TagId id, double base) {
   d.tag_size = 0.16;
   d.calibrated = n % 2 == 0;
   d.decode_error = 1.25e-4 * n;
+  d.worst_cell = 0.015 * n;
   d.edge_score = 42.5 + n;
   d.reprojection_error = 0.03 * n;
   return d;
@@ -48,6 +49,7 @@ void expect_equal(const Detection& a, const Detection& b) {
   fail_unless(a.rvec == b.rvec && a.tvec == b.tvec);
   fail_unless(a.tag_size == b.tag_size && a.calibrated == b.calibrated);
   fail_unless(a.decode_error == b.decode_error && a.edge_score == b.edge_score);
+  fail_unless(a.worst_cell == b.worst_cell);
   fail_unless(a.reprojection_error == b.reprojection_error);
 }
 

@@ -563,6 +563,17 @@ GST_START_TEST(test_bad_property_values)
   g_object_get(src, "ids", &ids, nullptr);
   fail_unless(ids == nullptr);
   gst_object_unref(src);
+
+  // family is an enum: a launch line with an unknown family is refused, naming it.
+  for (const char* bad : {"9x9", "4X4", "3x3,4x4"}) {
+    GError* error = nullptr;
+    GstElement* pipeline =
+        gst_parse_launch((std::string("lftagtestsrc family=") + bad + " ! fakesink").c_str(), &error);
+    fail_unless(error != nullptr, "family=%s accepted", bad);
+    fail_unless(std::string(error->message).find(bad) != std::string::npos, "%s", error->message);
+    g_error_free(error);
+    if (pipeline) gst_object_unref(pipeline);
+  }
 }
 GST_END_TEST;
 

@@ -33,7 +33,9 @@ TagId decode_centres(const Family& f, const std::vector<cv::Point2d>& centres) {
 TEST(Family, ParsesNamesAndRejectsUnknown) {
   EXPECT_EQ(Family::parse("3x3").n(), 3);
   EXPECT_EQ(Family::parse("8x8").name(), "8x8");
-  for (const char* bad : {"1x1", "9x9", "3x4", "3", "", "33", "3X3", "10x10"}) {
+  EXPECT_EQ(Family::parse("4X4").n(), 4);
+  EXPECT_EQ(Family::parse(" 4x4\t").n(), 4);
+  for (const char* bad : {"1x1", "9x9", "3x4", "3", "", " ", "33", "3 x3", "3xx3", "10x10"}) {
     try {
       Family::parse(bad);
       ADD_FAILURE() << bad;
@@ -47,6 +49,15 @@ TEST(Family, ParsesNamesAndRejectsUnknown) {
   ASSERT_EQ(list.size(), 2u);
   EXPECT_EQ(list[1].n(), 4);
   EXPECT_THROW(Family::parse_list("3x3,"), std::invalid_argument);
+  const auto spaced = Family::parse_list("3x3, 4X4");
+  ASSERT_EQ(spaced.size(), 2u);
+  EXPECT_EQ(spaced[1].n(), 4);
+  try {
+    Family::parse_list("3x3, 9x9");
+    ADD_FAILURE() << "9x9 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("' 9x9'"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Family, SizesAndDictionaries) {

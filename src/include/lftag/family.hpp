@@ -31,9 +31,10 @@ class Family {
 
   // Throws std::invalid_argument unless 2 <= n <= 8.
   explicit Family(int n);
-  // Parses "3x3"; throws std::invalid_argument naming the accepted families.
+  // Parses "3x3" (also "3X3", and with spaces around it); throws std::invalid_argument
+  // naming the accepted families.
   static Family parse(std::string_view name);
-  // Parses a comma-separated list such as "3x3,4x4"; duplicates are removed.
+  // Parses a comma-separated list such as "3x3,4x4" or "3x3, 4X4"; duplicates are removed.
   static std::vector<Family> parse_list(std::string_view names);
   static std::vector<Family> all();
 

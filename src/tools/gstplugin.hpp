@@ -1,0 +1,17 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// How the `lftag` tool finds the lftag GStreamer plugin (libgstlftag.so).
+#pragma once
+
+#include <string>
+
+namespace lftag::tools {
+
+// Initialises GStreamer with the plugin available. The tool of a build tree uses that
+// build's plugin (its gst/ folder goes first on GST_PLUGIN_PATH, as `meson devenv` does);
+// an installed tool uses GStreamer's registry (GST_PLUGIN_PATH, then the system plugin
+// directory, where `meson install` puts the plugin) and, if the plugin is not there,
+// the directory it was installed to. Returns an empty string, or why the plugin's
+// elements cannot be had (a sentence that says what to do).
+std::string init_gstreamer_with_plugin();
+
+}  // namespace lftag::tools

@@ -1,0 +1,294 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: LGPL-2.1-or-later
+"""`lftag annotate` as a user runs it, on short videos of lftagtestsrc whose ground truth
+is kept while they are written: the annotated video decodes, the JSON Lines match the
+truth, mistakes end with one line, a non-zero status and no file, progress suits the
+terminal or the log. Reports each case as TAP.
+
+    annotate.py LFTAG_EXECUTABLE WORK_DIR
+"""
+import json
+import math
+import os
+import pty
+import signal
+import subprocess
+import sys
+import time
+import traceback
+
+import gi
+
+gi.require_version("Gst", "1.0")
+from gi.repository import Gst  # noqa: E402
+
+lftag, work = sys.argv[1:3]
+os.makedirs(work, exist_ok=True)
+Gst.init(None)
+CASES = []
+FRAMES = 45
+IDS = (6789, 42, 300)
+
+
+def case(function):
+    CASES.append(function)
+    return function
+
+
+def path(name):
+    return os.path.join(work, name)
+
+
+def annotate(*args, expect=0, env=None, stderr=subprocess.PIPE):
+    # In the work directory, where a stray file would show.
+    result = subprocess.run([lftag, "annotate", *args], stdout=subprocess.PIPE, stderr=stderr, text=True,
+                            timeout=600, env=dict(os.environ, **(env or {})), cwd=work)
+    assert result.returncode == expect, (f"lftag annotate {' '.join(args)} exited {result.returncode}, not {expect}\n"
+                                         f"{result.stdout}\n{result.stderr}")
+    return result
+
+
+def remove(*names):
+    for name in names:
+        for p in (path(name), path(name) + ".part"):
+            if os.path.exists(p):
+                os.remove(p)
+
+
+def run_to_eos(pipeline):
+    bus = pipeline.get_bus()
+    pipeline.set_state(Gst.State.PLAYING)
+    message = bus.timed_pop_filtered(600 * Gst.SECOND, Gst.MessageType.EOS | Gst.MessageType.ERROR)
+    pipeline.set_state(Gst.State.NULL)
+    assert message and message.type == Gst.MessageType.EOS, message.parse_error() if message else "timeout"
+
+
+TRUTH = {}
+
+
+def recording():
+    """45 frames at 640x480 of three moving 3x3 markers with noise, as VP8 in WebM, and the
+    truth of every frame (in order): [(family, id, centre, fully visible, edge in px)]."""
+    video = path("input.webm")
+    if not TRUTH:
+        if os.path.exists(video):
+            os.remove(video)
+        pipeline = Gst.parse_launch(
+            f"lftagtestsrc num-buffers={FRAMES} ids={','.join(map(str, IDS))} noise=1 ! "
+            "video/x-raw,width=640,height=480 ! identity name=tap ! videoconvert ! "
+            "vp8enc deadline=1 target-bitrate=3000000 ! webmmux ! filesink name=out")
+        pipeline.get_by_name("out").set_property("location", video)
+        frames = []
+
+        def keep(pad, info):
+            truth = info.get_buffer().get_custom_meta("LFTagTruthMeta").get_structure()
+            frames.append([(m.get_value("family"), int(m.get_value("id-string")), tuple(m.get_value("center")),
+                            m.get_value("fully-visible"), m.get_value("edge-px")) for m in truth.get_value("markers")])
+            return Gst.PadProbeReturn.OK
+
+        pipeline.get_by_name("tap").get_static_pad("src").add_probe(Gst.PadProbeType.BUFFER, keep)
+        run_to_eos(pipeline)
+        TRUTH["frames"] = frames
+    return video
+
+
+def decoded(video):
+    """Width, height and number of frames of a video file, decoded, and its video caps
+    before decoding (the codec)."""
+    pipeline = Gst.parse_launch("filesrc name=in ! parsebin name=parse ! decodebin ! videoconvert ! "
+                                "appsink name=out sync=false")
+    pipeline.get_by_name("in").set_property("location", video)
+    codecs = []
+
+    def on_pad(element, pad):
+        caps = pad.get_current_caps() or pad.query_caps(None)
+        codecs.append(caps.get_structure(0).get_name())
+
+    pipeline.get_by_name("parse").connect("pad-added", on_pad)
+    sink = pipeline.get_by_name("out")
+    pipeline.set_state(Gst.State.PLAYING)
+    frames, size = 0, None
+    while (sample := sink.emit("try-pull-sample", 60 * Gst.SECOND)) is not None:
+        s = sample.get_caps().get_structure(0)
+        size = (s.get_value("width"), s.get_value("height"))
+        frames += 1
+    pipeline.set_state(Gst.State.NULL)
+    return size, frames, codecs
+
+
+def check_jsonl(lines):
+    """Every line a frame in order, its detections the truth's markers where they are."""
+    frames = TRUTH["frames"]
+    assert len(lines) == len(frames), f"{len(lines)} lines for {len(frames)} frames"
+    visible = found = 0
+    for n, (line, truth) in enumerate(zip(lines, frames)):
+        assert line["frame"] == n, line["frame"]
+        # WebM keeps timestamps to the millisecond.
+        assert abs(line["pts"] - n * Gst.SECOND / 30) <= Gst.MSECOND, (n, line["pts"])
+        assert abs(line["time"] - line["pts"] / Gst.SECOND) < 1e-9
+        assert (line["width"], line["height"]) == (640, 480)
+        assert list(line)[:3] == ["frame", "pts", "time"], list(line)
+
+        def matches(d, m):
+            family, marker_id, center, _, edge = m
+            return (d["family"], d["id"]) == (family, marker_id) and math.dist(d["center"], center) <= max(
+                2.0, 0.1 * edge)
+
+        for d in line["detections"]:
+            assert any(matches(d, m) for m in truth), f"frame {n}: wrong detection {d['family']} {d['id']} " \
+                                                      f"at {d['center']}"
+            assert len(d["centroids"]) == 9 and len(d["pose"]["tvec"]) == 3 and "worst_cell" in d
+        for m in truth:
+            if m[3]:
+                visible += 1
+                found += any(matches(d, m) for d in line["detections"])
+    assert visible > 100 and found >= 0.9 * visible, f"found {found} of {visible} visible markers"
+    return found
+
+
+@case
+def annotate_every_container():
+    recording()
+    for name, codec in (("out.mp4", "video/x-h264"), ("out.mkv", "video/x-h264"), ("out.webm", "video/x-vp8"),
+                        ("out.avi", "image/jpeg")):
+        remove(name, name + ".jsonl")
+        result = annotate(recording(), "--output", path(name), "--jsonl", path(name + ".jsonl"))
+        size, frames, codecs = decoded(path(name))
+        assert (size, frames) == ((640, 480), FRAMES), (name, size, frames)
+        assert codecs and codecs[0] == codec, (name, codecs)
+        assert not os.path.exists(path(name) + ".part") and not os.path.exists(path(name + ".jsonl") + ".part")
+        check_jsonl([json.loads(line) for line in open(path(name + ".jsonl"))])
+        # A log gets no carriage returns or escape sequences; the summary names the markers.
+        assert "\r" not in result.stderr and "\033" not in result.stderr, repr(result.stderr)
+        assert f"{FRAMES} frames in" in result.stderr, result.stderr
+        assert all(f"3x3 {i} (" in result.stderr for i in IDS), result.stderr
+        assert result.stdout == "", result.stdout
+
+
+@case
+def jsonl_to_stdout_without_video():
+    result = annotate(recording(), "--jsonl", "-", "--quiet")
+    check_jsonl([json.loads(line) for line in result.stdout.splitlines()])
+    assert result.stderr == "", result.stderr
+    assert not [name for name in os.listdir(work) if name.endswith(".part")], os.listdir(work)
+
+
+@case
+def options_reach_the_detector():
+    # Families the video does not have: nothing found. A camera: metric poses and axes.
+    result = annotate(recording(), "--jsonl", "-", "--family", "4X4, 5x5")
+    assert all(json.loads(line)["detections"] == [] for line in result.stdout.splitlines())
+    assert "no markers found" in result.stderr, result.stderr
+    result = annotate(recording(), "--jsonl", "-", "--fx", "640", "--tag-size", "0.05", "-q")
+    poses = [d["pose"] for line in result.stdout.splitlines() for d in json.loads(line)["detections"]]
+    assert poses and all(p["calibrated"] and p["tag_size"] == 0.05 for p in poses), poses[:1]
+
+
+@case
+def progress_on_a_terminal():
+    remove("tty.webm")
+    master, slave = pty.openpty()
+    process = subprocess.Popen([lftag, "annotate", recording(), "--output", path("tty.webm")], stdout=subprocess.PIPE,
+                               stderr=slave)
+    os.close(slave)
+    output = b""
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:  # the other side closed
+            break
+        if not chunk:
+            break
+        output += chunk
+    assert process.wait(timeout=600) == 0, output
+    os.close(master)
+    text = output.decode()
+    assert "\r" in text and "fps" in text and "100 %" in text, repr(text)
+    assert f"{FRAMES} frames in" in text, repr(text)
+
+
+@case
+def mistakes_end_with_one_line_and_no_file():
+    recording()
+    not_video = path("not-a-video.webm")
+    with open(not_video, "w") as f:
+        f.write("this is text\n" * 100)
+    cases = [
+        ((path("missing.webm"), "--output", path("m.mp4")), 1, "missing.webm"),
+        ((not_video, "--output", path("m.mp4")), 1, "cannot decode"),
+        ((recording(), "--output", "/nonexistent-dir/m.mp4"), 1, "cannot write '/nonexistent-dir/m.mp4'"),
+        ((recording(), "--output", path("m.mp4"), "--jsonl", "/nonexistent-dir/m.jsonl"), 1, "m.jsonl"),
+        ((recording(), "--output", path("m.xyz")), 2, ".mp4"),
+        ((recording(), "--output", path("m.mp4"), "--family", "9x9"), 2, "9x9"),
+        ((recording(), "--output", path("m.mp4"), "--overlay", "outline,box"), 2, "box"),
+        ((recording(), "--output", path("m.mp4"), "--calibration", path("none.yml")), 2, "none.yml"),
+        ((recording(),), 2, "--output"),
+    ]
+    for args, status, needle in cases:
+        result = annotate(*args, expect=status)
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("lftag annotate: ") and needle in lines[0], (args, lines)
+        for name in ("m.mp4", "m.mp4.part", "m.xyz", "m.xyz.part", "m.jsonl", "m.jsonl.part"):
+            assert not os.path.exists(path(name)), (args, name)
+
+
+@case
+def no_encoder_says_what_to_install():
+    # As if gstreamer1.0-plugins-ugly and -libav were not installed: no H.264 encoder.
+    env = {"GST_PLUGIN_LOADING_WHITELIST": os.environ["GST_PLUGIN_LOADING_WHITELIST"].replace(
+        "gst-plugins-ugly:", "").replace("gst-libav:", ""), "GST_REGISTRY_1_0": path("no-ugly.registry")}
+    result = annotate(recording(), "--output", path("m.mp4"), expect=1, env=env)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "gstreamer1.0-plugins-ugly" in lines[0] and ".webm" in lines[0], lines
+    assert not os.path.exists(path("m.mp4")) and not os.path.exists(path("m.mp4.part"))
+    remove("fallback.mkv")
+    result = annotate(recording(), "--output", path("fallback.mkv"), env=env)  # .mkv falls back to VP8
+    assert decoded(path("fallback.mkv"))[2][0] == "video/x-vp8"
+
+
+@case
+def finds_the_plugin_of_its_build():
+    # Run as a user runs build/src/lftag: no plugin path at all, a registry of its own.
+    env = {k: v for k, v in os.environ.items() if not k.startswith("GST_PLUGIN")}
+    env["GST_REGISTRY_1_0"] = path("plain.registry")
+    result = subprocess.run([lftag, "annotate", recording(), "--jsonl", "-", "-q"], capture_output=True, text=True,
+                            env=env, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert len(result.stdout.splitlines()) == FRAMES
+
+
+@case
+def interrupted_run_leaves_nothing():
+    long_video = path("long.webm")
+    if not os.path.exists(long_video):
+        pipeline = Gst.parse_launch("lftagtestsrc num-buffers=900 count=2 ! video/x-raw,width=320,height=240 ! "
+                                    "videoconvert ! vp8enc deadline=1 ! webmmux ! filesink name=out")
+        pipeline.get_by_name("out").set_property("location", long_video)
+        run_to_eos(pipeline)
+    remove("cut.mp4", "cut.jsonl")
+    process = subprocess.Popen([lftag, "annotate", long_video, "--output", path("cut.mp4"), "--jsonl",
+                                path("cut.jsonl")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not os.path.exists(path("cut.mp4.part")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, (process.returncode, stderr)
+    assert "interrupted" in stderr, stderr
+    for name in ("cut.mp4", "cut.mp4.part", "cut.jsonl", "cut.jsonl.part"):
+        assert not os.path.exists(path(name)), name
+
+
+print(f"1..{len(CASES)}")
+failed = 0
+for number, function in enumerate(CASES, 1):
+    try:
+        function()
+        print(f"ok {number} - {function.__name__}", flush=True)
+    except Exception:  # noqa: BLE001 - every failure is reported, then the next case runs
+        failed += 1
+        print(f"not ok {number} - {function.__name__}")
+        for line in traceback.format_exc().splitlines():
+            print("# " + line, flush=True)
+raise SystemExit(1 if failed else 0)

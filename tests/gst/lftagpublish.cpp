@@ -1,0 +1,292 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// lftagpublish: one JSON line per buffer with an LFTagMeta, matching the meta (the same
+// JSON as `lftag detect`) and the buffer's timestamps; to a file or the standard output;
+// append; an unwritable location fails the start; which metas survive encoders, decoders
+// and muxers; a warning when there is no meta.
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <glib/gstdio.h>
+#include <nlohmann/json.hpp>
+
+#include "json.hpp"
+#include "lftagmeta.h"
+// Last: check's macros (fail...) clash with names in the C++ library.
+#include "check-main.h"
+
+namespace {
+
+struct Seen {
+  GstClockTime pts, dts, duration;
+  GstStructure* meta;  // may be null
+};
+
+struct Run {
+  std::vector<Seen> buffers;  // as they reached the sink
+  std::vector<GstMessage*> warnings;
+  GMutex lock;
+  Run() { g_mutex_init(&lock); }
+  ~Run() {
+    for (Seen& s : buffers)
+      if (s.meta) gst_structure_free(s.meta);
+    for (GstMessage* m : warnings) gst_message_unref(m);
+    g_mutex_clear(&lock);
+  }
+};
+
+// Runs `launch` (with a sink named "sink") to EOS, recording what reaches the sink and the
+// warnings; an error fails the test.
+void run_pipeline(const std::string& launch, Run& run) {
+  GError* error = nullptr;
+  GstElement* pipeline = gst_parse_launch(launch.c_str(), &error);
+  fail_unless(pipeline != nullptr && error == nullptr, "cannot build %s: %s", launch.c_str(),
+              error ? error->message : "");
+  GstElement* sink = gst_bin_get_by_name(GST_BIN(pipeline), "sink");
+  GstPad* pad = gst_element_get_static_pad(sink, "sink");
+  gst_pad_add_probe(
+      pad, GST_PAD_PROBE_TYPE_BUFFER,
+      [](GstPad*, GstPadProbeInfo* info, gpointer data) {
+        auto* run = static_cast<Run*>(data);
+        GstBuffer* b = GST_PAD_PROBE_INFO_BUFFER(info);
+        const GstStructure* meta = lftag_meta_get_structure(b, LFTAG_META_NAME);
+        g_mutex_lock(&run->lock);
+        run->buffers.push_back({GST_BUFFER_PTS(b), GST_BUFFER_DTS(b), GST_BUFFER_DURATION(b),
+                                meta ? gst_structure_copy(meta) : nullptr});
+        g_mutex_unlock(&run->lock);
+        return GST_PAD_PROBE_OK;
+      },
+      &run, nullptr);
+  gst_object_unref(pad);
+  gst_object_unref(sink);
+
+  GstBus* bus = gst_element_get_bus(pipeline);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+  while (GstMessage* m = gst_bus_timed_pop_filtered(
+             bus, 120 * GST_SECOND, GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR | GST_MESSAGE_WARNING))) {
+    if (GST_MESSAGE_TYPE(m) == GST_MESSAGE_ERROR) {
+      gst_message_parse_error(m, &error, nullptr);
+      fail("%s: %s", launch.c_str(), error->message);
+    }
+    if (GST_MESSAGE_TYPE(m) == GST_MESSAGE_WARNING) {
+      run.warnings.push_back(m);
+      continue;
+    }
+    gst_message_unref(m);
+    break;
+  }
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+}
+
+std::vector<nlohmann::json> read_lines(const std::string& path) {
+  std::vector<nlohmann::json> lines;
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) lines.push_back(nlohmann::json::parse(line));
+  return lines;
+}
+
+std::string temp_path(const char* name) {
+  gchar* dir = g_dir_make_tmp("lftagpublish-XXXXXX", nullptr);
+  const std::string path = std::string(dir) + "/" + name;
+  g_free(dir);
+  return path;
+}
+
+nlohmann::json time_json(GstClockTime t) {
+  return GST_CLOCK_TIME_IS_VALID(t) ? nlohmann::json(std::uint64_t(t)) : nlohmann::json(nullptr);
+}
+
+// Each line is the buffer's: timestamps, frame number, size and the meta's detections as
+// `lftag detect` would print them.
+void expect_lines_match(const std::vector<nlohmann::json>& lines, const Run& run) {
+  fail_unless_equals_int(lines.size(), run.buffers.size());
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    const nlohmann::json& line = lines[i];
+    const Seen& seen = run.buffers[i];
+    fail_unless(seen.meta != nullptr);
+    fail_unless_equals_int(line.at("frame").get<int>(), int(i));
+    fail_unless(line.at("pts") == time_json(seen.pts), "frame %d: pts %s", int(i), line.at("pts").dump().c_str());
+    fail_unless(line.at("dts") == time_json(seen.dts));
+    fail_unless(line.at("duration") == time_json(seen.duration));
+    fail_unless(line.at("running_time") == time_json(seen.pts));  // one segment from 0
+    fail_unless(line.at("stream_time") == time_json(seen.pts));
+    fail_unless(std::abs(line.at("time").get<double>() - double(seen.pts) / GST_SECOND) < 1e-9);
+    gint width, height;
+    gst_structure_get_int(seen.meta, LFTAG_META_FIELD_WIDTH, &width);
+    gst_structure_get_int(seen.meta, LFTAG_META_FIELD_HEIGHT, &height);
+    fail_unless(line.at("width") == width && line.at("height") == height);
+    nlohmann::json expected = nlohmann::json::array();
+    const GValue* list = gst_structure_get_value(seen.meta, LFTAG_META_FIELD_DETECTIONS);
+    for (guint k = 0; k < gst_value_array_get_size(list); ++k)
+      expected.push_back(lftag::tools::detection_json(
+          lftag::gst::detection_from_structure(gst_value_get_structure(gst_value_array_get_value(list, k)))));
+    fail_unless(line.at("detections") == expected, "frame %d: %s", int(i), line.at("detections").dump().c_str());
+  }
+}
+
+}  // namespace
+
+GST_START_TEST(test_file_matches_metas) {
+  const std::string path = temp_path("d.jsonl");
+  Run run;
+  run_pipeline("lftagtestsrc num-buffers=12 ids=6789,42 ! lftagdetect ! lftagpublish location=" + path +
+                   " ! fakesink name=sink",
+               run);
+  const std::vector<nlohmann::json> lines = read_lines(path);
+  expect_lines_match(lines, run);
+  // Both markers in every frame, as `lftag detect` writes them.
+  for (const nlohmann::json& line : lines) {
+    fail_unless_equals_int(line["detections"].size(), 2);
+    for (const nlohmann::json& d : line["detections"]) {
+      fail_unless(d["id"] == 6789 || d["id"] == 42, "%s", d.dump().c_str());
+      fail_unless(d["family"] == "3x3" && d.contains("worst_cell") && d.contains("id_hex"));
+    }
+  }
+  fail_unless_equals_uint64(lines[3]["pts"].get<std::uint64_t>(), gst_util_uint64_scale(3, GST_SECOND, 30));
+  fail_unless(run.warnings.empty());
+  g_unlink(path.c_str());
+}
+GST_END_TEST;
+
+// Appending adds to the file; otherwise it is replaced.
+GST_START_TEST(test_append) {
+  const std::string path = temp_path("a.jsonl");
+  const std::string launch = "lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish location=" + path;
+  Run first, second, third;
+  run_pipeline(launch + " ! fakesink name=sink", first);
+  run_pipeline(launch + " append=true ! fakesink name=sink", second);
+  fail_unless_equals_int(read_lines(path).size(), 6);
+  run_pipeline(launch + " ! fakesink name=sink", third);
+  fail_unless_equals_int(read_lines(path).size(), 3);
+  g_unlink(path.c_str());
+}
+GST_END_TEST;
+
+// Unset, empty or "-": the standard output.
+GST_START_TEST(test_stdout) {
+  for (const char* location : {"", " location=-", " location=\"\""}) {
+    const std::string path = temp_path("stdout.jsonl");
+    fflush(stdout);
+    const int saved = dup(STDOUT_FILENO);
+    FILE* capture = fopen(path.c_str(), "w");
+    dup2(fileno(capture), STDOUT_FILENO);
+    Run run;
+    run_pipeline(std::string("lftagtestsrc num-buffers=4 ids=77 ! lftagdetect ! lftagpublish") + location +
+                     " ! fakesink name=sink",
+                 run);
+    fflush(stdout);
+    dup2(saved, STDOUT_FILENO);
+    close(saved);
+    fclose(capture);
+    expect_lines_match(read_lines(path), run);
+    g_unlink(path.c_str());
+  }
+}
+GST_END_TEST;
+
+// A location that cannot be written fails the state change with an error naming it.
+GST_START_TEST(test_unwritable_location) {
+  GstElement* pipeline = gst_parse_launch(
+      "lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p location=/nonexistent-dir/d.jsonl ! fakesink",
+      nullptr);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) == GST_STATE_CHANGE_FAILURE);
+  GstMessage* m = gst_bus_pop_filtered(bus, GST_MESSAGE_ERROR);
+  fail_unless(m != nullptr);
+  fail_unless_equals_string(GST_OBJECT_NAME(GST_MESSAGE_SRC(m)), "p");
+  GError* error = nullptr;
+  gst_message_parse_error(m, &error, nullptr);
+  fail_unless(g_error_matches(error, GST_RESOURCE_ERROR, GST_RESOURCE_ERROR_OPEN_WRITE), "%s", error->message);
+  fail_unless(std::string(error->message).find("/nonexistent-dir/d.jsonl") != std::string::npos, "%s",
+              error->message);
+  g_error_free(error);
+  gst_message_unref(m);
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+}
+GST_END_TEST;
+
+// The meta is kept by a video encoder and by a decoder fed by it: lftagpublish after them
+// writes every frame. Read back from a file it is gone, and the element says so once.
+GST_START_TEST(test_after_encode_and_decode) {
+  const std::string path = temp_path("coded.jsonl");
+  Run run;
+  run_pipeline("lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect ! videoconvert ! vp8enc deadline=1 ! "
+               "lftagpublish location=" + path + ".encoded ! vp8dec ! lftagpublish location=" + path +
+                   " ! fakesink name=sink",
+               run);
+  fail_unless_equals_int(read_lines(path + ".encoded").size(), 8);
+  const std::vector<nlohmann::json> lines = read_lines(path);
+  fail_unless_equals_int(lines.size(), 8);
+  for (const nlohmann::json& line : lines) fail_unless(line["detections"][0]["id"] == 6789);
+  fail_unless(run.warnings.empty());
+
+  Run written, read;
+  const std::string video = path + ".webm";
+  run_pipeline("lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect ! videoconvert ! vp8enc deadline=1 ! webmmux ! "
+               "filesink name=sink location=" + video,
+               written);
+  run_pipeline("filesrc location=" + video + " ! matroskademux ! vp8dec ! lftagpublish name=p location=" + path +
+                   " ! fakesink name=sink",
+               read);
+  Run& muxed = read;
+  fail_unless_equals_int(muxed.buffers.size(), 8);
+  fail_unless_equals_int(read_lines(path).size(), 0);
+  fail_unless_equals_int(muxed.warnings.size(), 1);
+  GError* error = nullptr;
+  gst_message_parse_warning(muxed.warnings[0], &error, nullptr);
+  fail_unless(std::string(error->message).find("without LFTagMeta") != std::string::npos, "%s", error->message);
+  g_error_free(error);
+  g_unlink(path.c_str());
+  g_unlink((path + ".encoded").c_str());
+  g_unlink(video.c_str());
+}
+GST_END_TEST;
+
+// After a seek the running time starts again at 0 while pts and stream time go on.
+GST_START_TEST(test_times_after_seek) {
+  const std::string path = temp_path("seek.jsonl");
+  GstElement* pipeline = gst_parse_launch(
+      ("lftagtestsrc count=1 ! lftagdetect ! lftagpublish location=" + path + " ! fakesink").c_str(), nullptr);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PAUSED) == GST_STATE_CHANGE_ASYNC);
+  fail_unless(gst_element_get_state(pipeline, nullptr, nullptr, GST_CLOCK_TIME_NONE) == GST_STATE_CHANGE_SUCCESS);
+  fail_unless(gst_element_seek_simple(pipeline, GST_FORMAT_TIME,
+                                      GstSeekFlags(GST_SEEK_FLAG_FLUSH | GST_SEEK_FLAG_ACCURATE), 2 * GST_SECOND));
+  fail_unless(gst_element_get_state(pipeline, nullptr, nullptr, GST_CLOCK_TIME_NONE) == GST_STATE_CHANGE_SUCCESS);
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(pipeline);
+
+  // The preroll frame before the seek, and the one after it.
+  const std::vector<nlohmann::json> lines = read_lines(path);
+  fail_unless_equals_int(lines.size(), 2);
+  fail_unless_equals_uint64(lines[0]["pts"].get<std::uint64_t>(), 0);
+  const nlohmann::json& after = lines[1];
+  fail_unless_equals_int(after["frame"].get<int>(), 1);
+  fail_unless_equals_uint64(after["pts"].get<std::uint64_t>(), 2 * GST_SECOND);
+  fail_unless_equals_uint64(after["stream_time"].get<std::uint64_t>(), 2 * GST_SECOND);
+  fail_unless_equals_uint64(after["running_time"].get<std::uint64_t>(), 0);
+  g_unlink(path.c_str());
+}
+GST_END_TEST;
+
+static Suite* lftagpublish_suite(void) {
+  Suite* s = suite_create("lftagpublish");
+  TCase* tc = tcase_create("general");
+  suite_add_tcase(s, tc);
+  tcase_add_test(tc, test_file_matches_metas);
+  tcase_add_test(tc, test_append);
+  tcase_add_test(tc, test_stdout);
+  tcase_add_test(tc, test_unwritable_location);
+  tcase_add_test(tc, test_after_encode_and_decode);
+  tcase_add_test(tc, test_times_after_seek);
+  return s;
+}
+
+LFTAG_CHECK_MAIN(lftagpublish)
