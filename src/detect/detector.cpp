@@ -156,6 +156,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
       else if (!d)
         stage = passed[1]                                      ? Stage::ink
                 : passed[0]                                    ? Stage::margin
+                : best->verdict == detail::Verdict::ink        ? Stage::ink
                 : best->verdict == detail::Verdict::resolution ? Stage::resolution
                                                                : Stage::decoding;
       CandidateVerdict v = verdict_of(c, second_look, stage);

@@ -201,9 +201,10 @@ double signed_angle(cv::Point2d a, cv::Point2d b);
 
 // ---------------------------------------------------------------- decode.cpp
 // How a decoding ended: rejected because the marker is too small to read, by tau3 or the
-// cell residual bound, because another id fits within the margin, or accepted (the ink
-// check comes after).
-enum class Verdict { resolution, residual, margin, accepted };
+// cell residual bound, because no hypothesis's squares' ink matches the design (checked
+// before the grey levels, when no hypothesis could pass it), because another id fits
+// within the margin, or accepted (the best reading's own ink check comes after).
+enum class Verdict { resolution, residual, ink, margin, accepted };
 
 struct Decoding {
   Verdict verdict = Verdict::accepted;
@@ -219,8 +220,12 @@ struct Decoding {
   double ink_spread = 0;
 };
 
-// Tries the 16 key point hypotheses and returns the best one with its verdict and, when
-// accepted, its ink spread; none when no hypothesis could be read at all.
+// Tries the 16 key point hypotheses and returns the best one with its verdict and its ink
+// spread; none when no hypothesis could be read at all. When no hypothesis passes the
+// checks that need no grey levels (resolution, cell residual, ink spread), the side is
+// rejected before the edge scores and decoding errors are computed: the reading returned
+// is then the one with the least residual, its error and edge score filled in only when
+// `hypotheses` is not null.
 // `hypotheses`, when not null, receives every hypothesis' projected inner edge.
 // Times the hypotheses and the decoding into `stats`.
 std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const ImageView& image, const Camera& camera,
