@@ -20,6 +20,7 @@
 //   final pose (IPPE)         refine_pose, tag_size, camera     estimate_pose (pose.cpp)
 //   (not in the paper)        second_look, max_second_looks     near_candidates, enlarge_patch,
 //                                                               binarise_patch (second_look.cpp)
+//   (not in the paper)        max_candidates (the budget)       find_candidates (candidates.cpp)
 #pragma once
 
 #include <algorithm>
@@ -144,10 +145,16 @@ struct Candidate {
 // `image` and `binary` may be a patch of the frame (see PatchFrame): the candidates'
 // centroids, areas and inks are then given in the frame's pixels. Candidates that fail
 // the area constraint go to `area_rejected` when it is not null (for the trace).
+// `budget`, when not null, is the number of topological candidates the frame may still
+// examine (DetectorParams::max_candidates): when there are more, the most plausible are
+// examined (see DetectorParams), the budget is spent and the rest are counted into
+// stats.skipped_by_budget and listed in `skipped` when it is not null, unmeasured (their
+// blobs' centroids are the centres of their boxes).
 void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
                      const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
                      DetectionStats& stats, const PatchFrame& patch = {},
-                     std::vector<Candidate>* area_rejected = nullptr);
+                     std::vector<Candidate>* area_rejected = nullptr, int* budget = nullptr,
+                     std::vector<Candidate>* skipped = nullptr);
 
 // Centroid of the inverted grey image over `region` with its holes and the white pixels
 // within `reach` pixels of it that are nearer to it than to any other black pixel. `white` is the grey
