@@ -37,7 +37,8 @@ nlohmann::json stats_json(const DetectionStats& s) {
            {{"regions", s.regions}, {"topology", s.topology}, {"area", s.area}, {"geometry", s.geometry},
             {"angle", s.angle}, {"collinearity", s.collinearity}, {"residual", s.residual},
             {"unambiguous", s.unambiguous}, {"decoded", s.decoded}, {"second_looks", s.second_looks},
-            {"second_look_found", s.second_look_found}}},
+            {"second_look_found", s.second_look_found}, {"skipped_by_budget", s.skipped_by_budget},
+            {"second_looks_skipped", s.second_looks_skipped}}},
           {"time_ms",
            {{"threshold", s.threshold_ms}, {"regions", s.regions_ms}, {"candidates", s.candidates_ms},
             {"keypoints", s.keypoints_ms}, {"hypotheses", s.hypotheses_ms}, {"decode", s.decode_ms},
@@ -70,6 +71,7 @@ void add_detect_command(CLI::App& app, int& status) {
     std::string families = "3x3,4x4", calibration, debug_dir;
     double fx = NAN, fy = NAN, cx = NAN, cy = NAN, tag_size = 0.1;
     int window = 16, offset = 4;
+    int max_candidates = DetectorParams{}.max_candidates;
     bool stats = false, why = false;
   };
   auto opt = std::make_shared<Options>();
@@ -90,10 +92,18 @@ void add_detect_command(CLI::App& app, int& status) {
       ->check(CLI::Range(2, 1024));
   cmd->add_option("--threshold-offset", opt->offset, "Grey levels below the mean for black (default 4)")
       ->check(CLI::Range(0, 255));
-  cmd->add_flag("--stats", opt->stats, "Add the candidate funnel and per-stage times to each object");
+  cmd->add_option("--max-candidates", opt->max_candidates,
+                  "Candidates examined per image at most, the most plausible first; the rest are skipped and "
+                  "counted (--stats: skipped_by_budget). 0: no limit (default " +
+                      std::to_string(DetectorParams{}.max_candidates) + ")")
+      ->check(CLI::Range(0, 1 << 30));
+  cmd->add_flag("--stats", opt->stats,
+                "Add the candidate funnel (with the candidates and second looks the budget skipped) and "
+                "per-stage times to each object");
   cmd->add_flag("--why", opt->why,
                 "Add \"candidates\": every topological candidate with the stage that stopped it (area, "
-                "geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or \"detected\"");
+                "budget, geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or "
+                "\"detected\"");
   cmd->add_option("--debug-dir", opt->debug_dir,
                   "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
   cmd->callback([opt, &status] {
@@ -103,6 +113,7 @@ void add_detect_command(CLI::App& app, int& status) {
       base.tag_size = opt->tag_size;
       base.threshold_window = opt->window;
       base.threshold_offset = opt->offset;
+      base.max_candidates = opt->max_candidates;
       if (!opt->calibration.empty()) {
         base.camera = Camera::load(opt->calibration);
       } else if (!std::isnan(opt->fx)) {
@@ -171,8 +182,10 @@ void add_detect_command(CLI::App& app, int& status) {
     if (opt->stats)
       std::cerr << "lftag detect: " << total.frames << " images, funnel " << total.topology << " -> " << total.area
                 << " -> " << total.geometry << " -> " << total.angle << " -> " << total.collinearity << " -> "
-                << total.residual << " -> " << total.unambiguous << " -> " << total.decoded << ", mean " << total.total_ms() / std::max<std::int64_t>(1, total.frames)
-                << " ms per image\n";
+                << total.residual << " -> " << total.unambiguous << " -> " << total.decoded << ", mean "
+                << total.total_ms() / std::max<std::int64_t>(1, total.frames) << " ms per image; over budget: "
+                << total.skipped_by_budget << " candidates and " << total.second_looks_skipped
+                << " second looks skipped\n";
     if (failed) std::cerr << "lftag detect: " << failed << " of " << opt->images.size() << " images failed\n";
     status = failed ? 1 : 0;
   });
