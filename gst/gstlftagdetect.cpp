@@ -110,6 +110,7 @@ enum
   PROP_MIN_SPREAD_RATIO,
   PROP_MAX_DECODE_ERROR,
   PROP_MAX_CELL_RESIDUAL,
+  PROP_MAX_CANDIDATES,
 };
 
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
@@ -172,11 +173,12 @@ struct DetectorSettings {
   int threshold_window = 0, threshold_offset = 0;
   bool second_look = true;
   double max_ink_ratio = 0, min_spread_ratio = 0, max_decode_error = 0, max_cell_residual = 0;
+  int max_candidates = 0;
 
   auto tie () const {
     return std::tie (families, tag_size, fx, fy, cx, cy, distortion, threshold_window,
         threshold_offset, second_look, max_ink_ratio, min_spread_ratio, max_decode_error,
-        max_cell_residual);
+        max_cell_residual, max_candidates);
   }
   bool operator== (const DetectorSettings & o) const { return tie () == o.tie (); }
   bool operator!= (const DetectorSettings & o) const { return !(*this == o); }
@@ -201,6 +203,7 @@ struct Settings {
     detector.max_ink_ratio = defaults.max_ink_ratio;
     detector.min_spread_ratio = defaults.min_spread_ratio;
     detector.max_cell_residual = defaults.max_cell_residual;
+    detector.max_candidates = defaults.max_candidates;
   }
 };
 
@@ -215,6 +218,7 @@ struct State {
   std::optional<lftag::Detector> detector;
   DetectorSettings built, rejected;     /* the detector's settings; a set that failed */
   bool warned_uncalibrated = false;
+  bool warned_budget = false;           /* the first frame the budget cut */
 };
 
 /* "k1,k2,p1,p2[,k3[,k4,k5,k6]]" as OpenCV orders them, with a decimal point
@@ -259,6 +263,7 @@ detector_params (const DetectorSettings & s, const Camera & camera)
   p.max_ink_ratio = s.max_ink_ratio;
   p.min_spread_ratio = s.min_spread_ratio;
   p.max_cell_residual = s.max_cell_residual;
+  p.max_candidates = s.max_candidates;
   if (s.max_decode_error > 0)
     p.max_decode_error.fill (s.max_decode_error);
   return p;
@@ -427,6 +432,14 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
           "A reading is rejected when a square lies further than this from its "
           "decoded position, in marker units (positions are 1 unit apart)",
           0.01, 1.0, defaults.max_cell_residual, playing));
+  g_object_class_install_property (gobject_class, PROP_MAX_CANDIDATES,
+      g_param_spec_int ("max-candidates", "Candidates per frame",
+          "Work budget per frame: at most this many candidate markers (white "
+          "regions holding n x n black squares) are examined, the most plausible "
+          "first; the rest are skipped, so that a frame full of look-alikes (a "
+          "tiled wall, a perforated sheet) cannot stall the stream. The first "
+          "frame cut posts a warning. 0: no limit",
+          0, G_MAXINT, defaults.max_candidates, playing));
 
   gst_element_class_set_static_metadata (element_class,
       "LFTag detector", "Filter/Analyzer/Video",
@@ -565,6 +578,9 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
     case PROP_MAX_CELL_RESIDUAL:
       s.detector.max_cell_residual = g_value_get_double (value);
       break;
+    case PROP_MAX_CANDIDATES:
+      s.detector.max_candidates = g_value_get_int (value);
+      break;
     default:
       G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
       break;
@@ -635,6 +651,9 @@ gst_lftag_detect_get_property (GObject * object, guint prop_id, GValue * value,
     case PROP_MAX_CELL_RESIDUAL:
       g_value_set_double (value, s.detector.max_cell_residual);
       break;
+    case PROP_MAX_CANDIDATES:
+      g_value_set_int (value, s.detector.max_candidates);
+      break;
     default:
       G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
       break;
@@ -662,6 +681,7 @@ gst_lftag_detect_start (GstBaseTransform * trans)
   st.calibration.reset ();
   st.detector.reset ();
   st.warned_uncalibrated = false;
+  st.warned_budget = false;
   if (s.calibration_file.empty ())
     return TRUE;
 
@@ -939,8 +959,9 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
     return GST_FLOW_OK;
   }
   std::vector<Detection> detections;
+  lftag::DetectionStats stats;
   try {
-    detections = st.detector->detect (gst_lftag_detect_luma (st, &frame));
+    detections = st.detector->detect (gst_lftag_detect_luma (st, &frame), &stats);
   } catch (const std::exception & e) {
     gst_video_frame_unmap (&frame);
     GST_WARNING_OBJECT (self, "detection failed on %" GST_PTR_FORMAT
@@ -950,6 +971,17 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
   gst_video_frame_unmap (&frame);
   GST_LOG_OBJECT (self, "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT,
       detections.size (), GST_TIME_ARGS (GST_BUFFER_PTS (buffer)));
+  if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0) && !st.warned_budget) {
+    GST_ELEMENT_WARNING (self, STREAM, FAILED,
+        ("The frame at %" GST_TIME_FORMAT " held more candidate markers than the "
+            "per-frame budget allows (max-candidates=%d): %" G_GINT64_FORMAT
+            " candidates and %" G_GINT64_FORMAT " second looks were skipped, the most "
+            "plausible candidates examined first. Markers may be missed in such frames; "
+            "this is reported once per stream.", GST_TIME_ARGS (GST_BUFFER_PTS (buffer)),
+            s.detector.max_candidates, stats.skipped_by_budget, stats.second_looks_skipped),
+        (nullptr));
+    st.warned_budget = true;
+  }
 
   gst_lftag_detect_add_metas (buffer, info, detections);
 
