@@ -21,6 +21,8 @@ const std::vector<Experiment>& experiments() {
       {"fp", "false positives on marker-free real images (opencv-doc)", run_false_positives},
       {"video", "recall and pose error of moving markers composited into real video (1280x720, JPEG)", run_video},
       {"speed", "median time per 1280x720 and 1920x1080 frame, one thread", run_speed},
+      {"adversarial", "time and recall on grids of dotted tiles that make thousands of candidates, against an ordinary frame",
+       run_adversarial},
   };
   return all;
 }

@@ -173,13 +173,25 @@ def video_bins_table(results):
     return table(["system (recall; markers per bin)"] + header, rows)
 
 
+def adversarial_table(results):
+    rows = []
+    for r in read(results, "adversarial.csv"):
+        found = f"{r['found']}/{r['markers']}" + ("" if r["all_found"] == "1" else " (missed)")
+        rows.append([r["config"], r["variant"], f"{float(r['median_ms']):.1f}", f"{float(r['ratio']):.1f}",
+                     f"{float(r['candidates']):,.0f}", f"{float(r['examined']):,.0f}",
+                     f"{float(r['skipped_by_budget']):,.0f}", found, r["wrong"]])
+    return table(["families (budget)", "frame", "median ms", "x ordinary", "candidates", "examined",
+                  "skipped by budget", "markers found", "other detections"], rows)
+
+
 def main(results):
     results = Path(results)
     for title, make in [("Range", range_table), ("Grazing angle", angle_table), ("Motion blur", blur_table),
                         ("Pose (median rotation deg / translation % of distance)", pose_table),
                         ("False positives", fp_table), ("Funnel", funnel_table), ("Speed", speed_table),
                         ("Stages", stage_table), ("Throughput", throughput_table), ("Video", video_table),
-                        ("Video recall by projected edge and tilt", video_bins_table)]:
+                        ("Video recall by projected edge and tilt", video_bins_table),
+                        ("Adversarial frames", adversarial_table)]:
         print(f"### {title}\n\n{make(results)}\n")
 
 

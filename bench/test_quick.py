@@ -41,6 +41,8 @@ EXPECTED = {
                            "median_translation_pct", "p90_translation_pct", "median_rotation_deg"], True),
     "video_clips.csv": (["clip", "video", "defocus_sigma_px", "noise_sigma", "light_gradient"], False),
     "video_counters.csv": (["system", "counter", "value"], False),
+    "adversarial.csv": (["config", "variant", "median_ms", "ratio", "candidates", "skipped_by_budget", "found",
+                         "all_found"], False),
 }
 PLOTS = ["range_vs_dictionary.png", "range_rate.png", "blur_polar.png", "pose_error.png", "speed.png",
          "video_recall.png"]
@@ -86,6 +88,12 @@ def main(bench, plot, work):
             if r["bin_kind"] == "all" and int(r["found"]) == 0:
                 fail(f"{r['system']} found none of the markers composited into video")
 
+    # Adversarial frames: the budget may skip tiles, never the real markers in front of them.
+    with open(work / "adversarial.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if r["all_found"] != "1":
+                fail(f"adversarial: {r['config']} {r['variant']}: {r['found']} of {r['markers']} real markers found")
+
     meta = json.loads((work / "meta.json").read_text())
     if meta["mode"] != "quick" or not set(SYSTEMS) <= set(meta["systems"]):
         fail("meta.json does not describe the run")
@@ -111,6 +119,8 @@ def main(bench, plot, work):
             fail(f"tables.py: no {section} table with {SYSTEMS[0]} in it")
         if "| " not in body:
             fail(f"tables.py: no {section} table")
+    if "### Adversarial frames" not in run.stdout or "white-4-10px" not in run.stdout:
+        fail("tables.py: no Adversarial frames table")
     print("bench quick run: all results, plots and tables written")
 
 

@@ -125,6 +125,7 @@ enum
   PROP_MAX_DECODE_ERROR,
   PROP_MAX_CELL_RESIDUAL,
   PROP_LATE_FRAMES,
+  PROP_MAX_CANDIDATES,
 };
 
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
@@ -203,11 +204,12 @@ struct DetectorSettings {
   int threshold_window = 0, threshold_offset = 0;
   bool second_look = true;
   double max_ink_ratio = 0, min_spread_ratio = 0, max_decode_error = 0, max_cell_residual = 0;
+  int max_candidates = 0;
 
   auto tie () const {
     return std::tie (families, tag_size, fx, fy, cx, cy, distortion, threshold_window,
         threshold_offset, second_look, max_ink_ratio, min_spread_ratio, max_decode_error,
-        max_cell_residual);
+        max_cell_residual, max_candidates);
   }
   bool operator== (const DetectorSettings & o) const { return tie () == o.tie (); }
   bool operator!= (const DetectorSettings & o) const { return !(*this == o); }
@@ -234,6 +236,7 @@ struct Settings {
     detector.max_ink_ratio = defaults.max_ink_ratio;
     detector.min_spread_ratio = defaults.min_spread_ratio;
     detector.max_cell_residual = defaults.max_cell_residual;
+    detector.max_candidates = defaults.max_candidates;
   }
 };
 
@@ -251,6 +254,7 @@ struct State {
   bool warned_uncalibrated = false;
   lftag::gst::DetectMessages messages;
   guint64 analysed = 0, skipped = 0;    /* frames, for QoS messages */
+  bool warned_budget = false;           /* the first frame the budget cut */
 };
 
 /* Downstream's latest QoS report: frames due before `earliest` (running time) are
@@ -302,6 +306,7 @@ detector_params (const DetectorSettings & s, const Camera & camera)
   p.max_ink_ratio = s.max_ink_ratio;
   p.min_spread_ratio = s.min_spread_ratio;
   p.max_cell_residual = s.max_cell_residual;
+  p.max_candidates = s.max_candidates;
   if (s.max_decode_error > 0)
     p.max_decode_error.fill (s.max_decode_error);
   return p;
@@ -506,6 +511,14 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
           "analyse it anyway, or pass it on unanalysed (its LFTagMeta has "
           "\"analysed\" FALSE, and a QoS message counts it). No frame is ever dropped",
           GST_TYPE_LFTAG_DETECT_LATE_FRAMES, DEFAULT_PROP_LATE_FRAMES, playing));
+  g_object_class_install_property (gobject_class, PROP_MAX_CANDIDATES,
+      g_param_spec_int ("max-candidates", "Candidates per frame",
+          "Work budget per frame: at most this many candidate markers (white "
+          "regions holding n x n black squares) are examined, the most plausible "
+          "first; the rest are skipped, so that a frame full of look-alikes (a "
+          "tiled wall, a perforated sheet) cannot stall the stream. The first "
+          "frame cut posts a warning. 0: no limit",
+          0, G_MAXINT, defaults.max_candidates, playing));
 
   gst_element_class_set_static_metadata (element_class,
       "LFTag detector", "Filter/Analyzer/Video",
@@ -674,6 +687,9 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
     case PROP_MAX_CELL_RESIDUAL:
       s.detector.max_cell_residual = g_value_get_double (value);
       break;
+    case PROP_MAX_CANDIDATES:
+      s.detector.max_candidates = g_value_get_int (value);
+      break;
     default:
       G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
       break;
@@ -750,6 +766,9 @@ gst_lftag_detect_get_property (GObject * object, guint prop_id, GValue * value,
     case PROP_MAX_CELL_RESIDUAL:
       g_value_set_double (value, s.detector.max_cell_residual);
       break;
+    case PROP_MAX_CANDIDATES:
+      g_value_set_int (value, s.detector.max_candidates);
+      break;
     default:
       G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
       break;
@@ -787,6 +806,7 @@ gst_lftag_detect_start (GstBaseTransform * trans)
         ("Invalid families %s.", s.families_error.c_str ()), (nullptr));
     return FALSE;
   }
+  st.warned_budget = false;
   if (s.calibration_file.empty ())
     return TRUE;
 
@@ -1139,8 +1159,9 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
     return GST_FLOW_OK;
   }
   std::vector<Detection> detections;
+  lftag::DetectionStats stats;
   try {
-    detections = st.detector->detect (gst_lftag_detect_luma (st, &frame));
+    detections = st.detector->detect (gst_lftag_detect_luma (st, &frame), &stats);
   } catch (const std::exception & e) {
     gst_video_frame_unmap (&frame);
     GST_WARNING_OBJECT (self, "detection failed on %" GST_PTR_FORMAT
@@ -1152,6 +1173,17 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
   ++st.analysed;
   GST_LOG_OBJECT (self, "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT,
       detections.size (), GST_TIME_ARGS (GST_BUFFER_PTS (buffer)));
+  if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0) && !st.warned_budget) {
+    GST_ELEMENT_WARNING (self, STREAM, FAILED,
+        ("The frame at %" GST_TIME_FORMAT " held more candidate markers than the "
+            "per-frame budget allows (max-candidates=%d): %" G_GINT64_FORMAT
+            " candidates and %" G_GINT64_FORMAT " second looks were skipped, the most "
+            "plausible candidates examined first. Markers may be missed in such frames; "
+            "this is reported once per stream.", GST_TIME_ARGS (GST_BUFFER_PTS (buffer)),
+            s.detector.max_candidates, stats.skipped_by_budget, stats.second_looks_skipped),
+        (nullptr));
+    st.warned_budget = true;
+  }
 
   gst_lftag_detect_add_metas (buffer, info, detections);
 

@@ -2,6 +2,7 @@
 // Topological filtering (paper IV-B), vertex estimation (IV-C) and the area constraint.
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 #include <Eigen/Dense>
 
@@ -137,11 +138,44 @@ Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, co
   return b;
 }
 
+namespace {
+
+// A white region with the child count of a family: a topological candidate, not yet measured.
+struct Topological {
+  int region;
+  int family;  // index into params.families
+  int first_kid, kid_count;  // into the kids list
+};
+
+// Topological candidates in the order they are to be examined when the budget cannot take
+// them all: the first of every enclosing black region before the second of any, and within
+// a round those whose region encloses fewest candidates first. A marker's border encloses
+// its white interior alone; the grout of a tiled wall or a perforated sheet encloses every
+// tile. Otherwise (stable) in the raster order of the white regions.
+void order_by_plausibility(const RegionTree& tree, std::vector<Topological>& all) {
+  std::vector<int> siblings(tree.regions.size() + 1, 0), rank(all.size());
+  for (std::size_t i = 0; i < all.size(); ++i) rank[i] = siblings[tree.regions[all[i].region].parent + 1]++;
+  std::vector<int> order(all.size());
+  std::iota(order.begin(), order.end(), 0);
+  const auto crowd = [&](int i) { return siblings[tree.regions[all[i].region].parent + 1]; };
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return rank[a] != rank[b] ? rank[a] < rank[b] : crowd(a) < crowd(b);
+  });
+  std::vector<Topological> sorted;
+  sorted.reserve(all.size());
+  for (int i : order) sorted.push_back(all[i]);
+  all.swap(sorted);
+}
+
+}  // namespace
+
 void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
                      const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
-                     DetectionStats& stats, const PatchFrame& patch, std::vector<Candidate>* area_rejected) {
+                     DetectionStats& stats, const PatchFrame& patch, std::vector<Candidate>* area_rejected,
+                     int* budget, std::vector<Candidate>* skipped) {
   out.clear();
   if (area_rejected) area_rejected->clear();
+  if (skipped) skipped->clear();
   const double pixel_area = 1.0 / (patch.scale * patch.scale);  // of a patch pixel, in frame pixels
   stats.regions += std::int64_t(tree.regions.size());
   int smallest = 1 << 30, largest = 0;
@@ -149,8 +183,11 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
     smallest = std::min(smallest, f.cell_count());
     largest = std::max(largest, f.cell_count() + params.max_extra_children);
   }
-  std::vector<int> kids;
 
+  // Topology: white regions with n^2 .. n^2 + extra children once the noise is left out.
+  thread_local std::vector<int> kids;
+  thread_local std::vector<Topological> found;
+  kids.clear(), found.clear();
   for (int r = 1; r < int(tree.regions.size()); ++r) {
     const Region& white = tree.regions[r];
     if (white.black || white.child_count < smallest) continue;
@@ -160,42 +197,79 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
     int largest_child = 0;
     for (int i = 0; i < white.child_count; ++i) largest_child = std::max(largest_child, tree.regions[child[i]].area);
     const double noise = std::max(white.area * params.min_child_fraction, largest_child / params.max_child_ratio);
-    kids.clear();
+    const int first = int(kids.size());
     for (int i = 0; i < white.child_count; ++i)
       if (tree.regions[child[i]].area >= noise) kids.push_back(child[i]);
-    if (int(kids.size()) < smallest || int(kids.size()) > largest) continue;
-
-    for (const Family& f : params.families) {
-      const int n2 = f.cell_count();
-      if (int(kids.size()) < n2 || int(kids.size()) > n2 + params.max_extra_children) continue;
-      ++stats.topology;
-      // Keep the n^2 largest children.
-      std::partial_sort(kids.begin(), kids.begin() + n2, kids.end(),
-                        [&](int a, int b) { return tree.regions[a].area > tree.regions[b].area; });
-      Candidate c;
-      c.family = f;
-      c.white_region = r;
-      c.white_area = white.area * pixel_area;
-      c.white_level = params.centroid_reference == CentroidReference::local_white ? white_level(tree, r, image) : 255.0;
-      for (int i = 0; i < n2; ++i) {
-        Blob b = measure_blob(tree, kids[i], image, binary, params.dilation * patch.scale, c.white_level);
-        b.centroid = patch.to_frame(b.centroid);
-        b.mass *= pixel_area;
-        c.blobs.push_back(b);
-      }
-      // Area constraint on the blobs' ink (the zeroth moments, robust at a few pixels),
-      // perspective taken out.
-      if (!(perspective_free_ink_ratio(c.blobs) <= params.max_ink_ratio)) {
-        if (area_rejected) area_rejected->push_back(std::move(c));
-        continue;
-      }
-      ++stats.area;
-      std::vector<cv::Point2d> observed;
-      for (const Blob& b : c.blobs) observed.push_back(b.centroid);
-      const std::vector<cv::Point2d> ideal = camera.undistort(observed);
-      for (int i = 0; i < n2; ++i) c.blobs[i].point = ideal[i];
-      out.push_back(std::move(c));
+    const int count = int(kids.size()) - first;
+    if (count < smallest || count > largest) {
+      kids.resize(first);
+      continue;
     }
+    for (int fi = 0; fi < int(params.families.size()); ++fi) {
+      const int n2 = params.families[fi].cell_count();
+      if (count >= n2 && count <= n2 + params.max_extra_children) found.push_back({r, fi, first, count});
+    }
+  }
+  stats.topology += std::int64_t(found.size());
+
+  // The budget: the most plausible first, the rest skipped.
+  std::size_t examined = found.size();
+  if (budget) {
+    if (found.size() > std::size_t(*budget)) {
+      order_by_plausibility(tree, found);
+      examined = std::size_t(*budget);
+    }
+    *budget -= int(examined);
+    stats.skipped_by_budget += std::int64_t(found.size() - examined);
+    if (skipped)
+      for (std::size_t i = examined; i < found.size(); ++i) {
+        Candidate c;
+        c.family = params.families[found[i].family];
+        c.white_region = found[i].region;
+        for (int k = 0; k < std::min(found[i].kid_count, c.family.cell_count()); ++k) {
+          const Region& g = tree.regions[kids[found[i].first_kid + k]];
+          Blob b;
+          b.region = kids[found[i].first_kid + k];
+          b.area = g.area;
+          b.centroid = patch.to_frame({(g.x0 + g.x1) / 2.0, (g.y0 + g.y1) / 2.0});
+          c.blobs.push_back(b);
+        }
+        skipped->push_back(std::move(c));
+      }
+  }
+
+  for (std::size_t i = 0; i < examined; ++i) {
+    const Topological& t = found[i];
+    const Family& f = params.families[t.family];
+    const int n2 = f.cell_count();
+    int* k = kids.data() + t.first_kid;
+    // Keep the n^2 largest children.
+    std::partial_sort(k, k + n2, k + t.kid_count,
+                      [&](int a, int b) { return tree.regions[a].area > tree.regions[b].area; });
+    Candidate c;
+    c.family = f;
+    c.white_region = t.region;
+    c.white_area = tree.regions[t.region].area * pixel_area;
+    c.white_level =
+        params.centroid_reference == CentroidReference::local_white ? white_level(tree, t.region, image) : 255.0;
+    for (int j = 0; j < n2; ++j) {
+      Blob b = measure_blob(tree, k[j], image, binary, params.dilation * patch.scale, c.white_level);
+      b.centroid = patch.to_frame(b.centroid);
+      b.mass *= pixel_area;
+      c.blobs.push_back(b);
+    }
+    // Area constraint on the blobs' ink (the zeroth moments, robust at a few pixels),
+    // perspective taken out.
+    if (!(perspective_free_ink_ratio(c.blobs) <= params.max_ink_ratio)) {
+      if (area_rejected) area_rejected->push_back(std::move(c));
+      continue;
+    }
+    ++stats.area;
+    std::vector<cv::Point2d> observed;
+    for (const Blob& b : c.blobs) observed.push_back(b.centroid);
+    const std::vector<cv::Point2d> ideal = camera.undistort(observed);
+    for (int j = 0; j < n2; ++j) c.blobs[j].point = ideal[j];
+    out.push_back(std::move(c));
   }
 }
 

@@ -5,6 +5,7 @@
 // image gradient along the projected inner border edge; under each, every data cell takes
 // the nearest observed centroid among its four possible centres. The best normalised
 // residual wins.
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -82,9 +83,44 @@ cv::Matx22d pixels_to_units(const cv::Matx33d& h, cv::Point2d u) { return units_
 // Pixels per unit along the marker's most foreshortened direction at unit point u: the
 // smaller singular value of h's Jacobian there.
 double smallest_scale(const cv::Matx33d& h, cv::Point2d u) {
-  cv::Matx21d values;
-  cv::SVD::compute(units_to_pixels(h, u), values, cv::SVD::NO_UV);
-  return std::isfinite(values(1)) ? values(1) : 0.0;
+  // The singular values of a 2x2 matrix in closed form: their squares sum to the squared
+  // entries and their product is the determinant.
+  const cv::Matx22d j = units_to_pixels(h, u);
+  const double squares = j(0, 0) * j(0, 0) + j(0, 1) * j(0, 1) + j(1, 0) * j(1, 0) + j(1, 1) * j(1, 1);
+  const double det = std::abs(j(0, 0) * j(1, 1) - j(0, 1) * j(1, 0));
+  const double largest = std::sqrt((squares + std::sqrt(std::max(0.0, squares * squares - 4 * det * det))) / 2);
+  const double smallest = largest > 0 ? det / largest : 0.0;
+  return std::isfinite(smallest) ? smallest : 0.0;
+}
+
+// The homography taking the unit square's corners (0, 0), (1, 0), (1, 1), (0, 1) to q[0]
+// .. q[3] (the projective map of a square onto a quadrilateral, in closed form); none when
+// three of the corners are collinear.
+std::optional<cv::Matx33d> square_to_quad(const std::array<cv::Point2d, 4>& q) {
+  const cv::Point2d sum = q[0] - q[1] + q[2] - q[3];
+  const cv::Point2d d1 = q[1] - q[2], d2 = q[3] - q[2];
+  const double den = d1.cross(d2);
+  if (!(std::abs(den) > 0)) return std::nullopt;
+  const double g = sum.cross(d2) / den, h = d1.cross(sum) / den;
+  return cv::Matx33d(q[1].x - q[0].x + g * q[1].x, q[3].x - q[0].x + h * q[3].x, q[0].x,
+                     q[1].y - q[0].y + g * q[1].y, q[3].y - q[0].y + h * q[3].y, q[0].y,
+                     g, h, 1.0);
+}
+
+// The homography taking the four points `from` to `to` (h33 = 1): through the unit square.
+// None when either set has three collinear points.
+std::optional<cv::Matx33d> four_point_homography(const std::array<cv::Point2d, 4>& from,
+                                                 const std::array<cv::Point2d, 4>& to) {
+  const auto a = square_to_quad(from), b = square_to_quad(to);
+  if (!a || !b) return std::nullopt;
+  const double det = cv::determinant(*a);
+  if (!(std::abs(det) > 0)) return std::nullopt;
+  cv::Matx33d m = *b * a->inv();
+  if (!(std::abs(m(2, 2)) > 0)) return std::nullopt;
+  m *= 1.0 / m(2, 2);
+  for (int i = 0; i < 9; ++i)
+    if (!std::isfinite(m.val[i])) return std::nullopt;
+  return m;
 }
 
 // The 3x3 Sobel gradient at pixel (x, y), edges replicated.
@@ -130,8 +166,9 @@ std::vector<cv::Point2d> square(double a, double b) {
 // (should-be-white, should-be-black) sample pairs whose grey levels are in the wrong order.
 // Black: the square centres and the middle of the border; white: the middle of the white
 // ring inside the border and the middle of the cross between the squares.
+// With `any_only`, returns 0 when there is none and 1 when there is any (no count, no sort).
 double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
-                        const Camera& camera) {
+                        const Camera& camera, bool any_only = false) {
   const double s = f.side();
   std::vector<cv::Point2d> black_units = f.centers(id), white_units;
   for (int i = 0; i < 8; ++i) {
@@ -151,10 +188,14 @@ double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const I
     for (const cv::Point2d& p : pixels) out.push_back(grey_at(image, p));
     return out;
   };
-  const std::vector<double> b = grey(black_units), w = grey(white_units);
-  int wrong = 0;
-  for (double wv : w)
-    for (double bv : b) wrong += wv <= bv;
+  std::vector<double> b = grey(black_units);
+  const std::vector<double> w = grey(white_units);
+  if (any_only) return *std::min_element(w.begin(), w.end()) <= *std::max_element(b.begin(), b.end()) ? 1.0 : 0.0;
+  // For each white sample, the black samples at least as bright (sorted: n log n, where
+  // every pair was n^2).
+  std::sort(b.begin(), b.end());
+  std::size_t wrong = 0;
+  for (double wv : w) wrong += std::size_t(b.end() - std::lower_bound(b.begin(), b.end(), wv));
   return double(wrong) / (w.size() * b.size());
 }
 
@@ -201,12 +242,38 @@ double edge_gradient(const ImageView& image, const Camera& camera, const cv::Mat
 
 namespace {
 
-// Under homography h, each data cell takes the blob and position (of its four) nearest to
-// each other. False when two cells claim one blob: then h cannot be this marker's.
-bool assign_cells(const Candidate& c, const KeyPoints& k, const cv::Matx33d& h, Decoding& d) {
+// The design centre of every cell for every digit, [g][digit] (a baseline's centre for
+// every digit), per family: computed once.
+using CellCentres = std::vector<std::array<cv::Point2d, 4>>;
+const CellCentres& design_centres(const Family& f) {
+  static const std::array<CellCentres, Family::kMaxN + 1> table = [] {
+    std::array<CellCentres, Family::kMaxN + 1> t;
+    for (int n = 2; n <= Family::kMaxN; ++n) {
+      const Family family(n);
+      t[n].resize(family.cell_count());
+      for (int g = 0; g < family.cell_count(); ++g)
+        for (int v = 0; v < 4; ++v) t[n][g][v] = family.center(g, family.is_baseline(g) ? 0 : v);
+    }
+    return t;
+  }();
+  return table[f.n()];
+}
+
+// Every design centre under homography h, [g][digit].
+void project_centres(const CellCentres& design, const cv::Matx33d& h, CellCentres& out) {
+  out.resize(design.size());
+  for (std::size_t g = 0; g < design.size(); ++g)
+    for (int v = 0; v < 4; ++v) out[g][v] = apply(h, design[g][v]);
+}
+
+// Under a homography whose design centres project to `projected`, each data cell takes
+// the blob and position (of its four) nearest to each other. False when two cells claim
+// one blob: then the homography cannot be this marker's.
+bool assign_cells(const Candidate& c, const KeyPoints& k, const CellCentres& projected, Decoding& d) {
   const Family& f = c.family;
   const std::array<int, 4> kc = f.keypoint_cells();
-  std::vector<char> used(c.blobs.size(), 0);
+  thread_local std::vector<char> used;
+  used.assign(c.blobs.size(), 0);
   d.blob_of_cell.assign(f.cell_count(), -1);
   d.blob_of_cell[kc[0]] = k.blob[0], d.blob_of_cell[kc[1]] = k.blob[1];
   used[k.blob[0]] = used[k.blob[1]] = 1;
@@ -215,7 +282,7 @@ bool assign_cells(const Candidate& c, const KeyPoints& k, const cv::Matx33d& h, 
     double nearest = std::numeric_limits<double>::max();
     int blob = -1;
     for (int v = 0; v < 4; ++v) {
-      const cv::Point2d p = apply(h, f.center(g, v));
+      const cv::Point2d p = projected[g][v];
       for (int j = 0; j < int(c.blobs.size()); ++j) {
         const cv::Point2d e = c.blobs[j].point - p;
         if (e.dot(e) < nearest) nearest = e.dot(e), blob = j;
@@ -243,8 +310,10 @@ bool maps_marker(const Family& f, const cv::Matx33d& h) {
 }
 
 // With the blobs assigned, each data cell's digit is its position nearest to its blob under
-// d.homography; fills the id, the squared residual (pixels^2) and the worst cell (units).
-double read_digits(const Candidate& c, Decoding& d) {
+// d.homography (whose design centres project to `projected`); fills the id and returns the
+// squared residual (pixels^2). With `worst`, also the worst cell (units).
+double read_digits(const Candidate& c, const CellCentres& design, const CellCentres& projected, Decoding& d,
+                   bool worst) {
   const Family& f = c.family;
   double residual = 0;
   d.id = TagId();
@@ -255,26 +324,55 @@ double read_digits(const Candidate& c, Decoding& d) {
     double nearest = std::numeric_limits<double>::max();
     int digit = 0;
     for (int v = 0; v < 4; ++v) {
-      const cv::Point2d e = blob - apply(d.homography, f.center(g, v));
+      const cv::Point2d e = blob - projected[g][v];
       if (e.dot(e) < nearest) nearest = e.dot(e), digit = v;
     }
     d.id = d.id.with_digit(f.data_index(g), digit);
     residual += nearest;
-    const cv::Point2d off = blob - apply(d.homography, f.center(g, digit));
-    d.worst_cell = std::max(d.worst_cell, cv::norm(pixels_to_units(d.homography, f.center(g, digit)) * cv::Vec2d(off.x, off.y)));
+    if (!worst) continue;
+    const cv::Point2d off = blob - projected[g][digit];
+    d.worst_cell = std::max(d.worst_cell, cv::norm(pixels_to_units(d.homography, design[g][digit]) * cv::Vec2d(off.x, off.y)));
   }
   return residual;
 }
 
 // The homography through all n^2 blobs at their decoded positions.
-std::optional<cv::Matx33d> refit(const Candidate& c, const Decoding& d) {
+std::optional<cv::Matx33d> refit(const Candidate& c, const CellCentres& design, const Decoding& d) {
   const Family& f = c.family;
   std::vector<cv::Point2d> units, points;
   for (int g = 0; g < f.cell_count(); ++g) {
-    units.push_back(f.center(g, f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g))));
+    units.push_back(design[g][f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g))]);
     points.push_back(c.blobs[d.blob_of_cell[g]].point);
   }
   return fit_homography(units, points);
+}
+
+// For 2x2 (see misordered_pairs): whether no sample that must be white is as dark as one
+// that must be black. The same samples in the same order as misordered_pairs, without its
+// allocations, and stopping at the first white sample that is too dark.
+bool no_misordered_pair(const Family& f, const CellCentres& design, TagId id, const cv::Matx33d& h,
+                        const ImageView& image, const Camera& camera) {
+  if (camera.has_distortion()) return misordered_pairs(f, id, h, image, camera, true) == 0;
+  const double s = f.side();
+  double darkest_white = HUGE_VAL, brightest_black = -HUGE_VAL;
+  for (int g = 0; g < f.cell_count(); ++g)
+    brightest_black = std::max(
+        brightest_black, grey_at(image, apply(h, design[g][f.is_baseline(g) ? 0 : id.digit(f.data_index(g))])));
+  for (int i = 0; i < 8; ++i) {
+    const double t = 1 + (s - 2) * (i + 0.5) / 8;  // along the border's middle line
+    for (const cv::Point2d& p : {cv::Point2d(t, 1), cv::Point2d(s - 1, t), cv::Point2d(s - t, s - 1), cv::Point2d(1, s - t)})
+      brightest_black = std::max(brightest_black, grey_at(image, apply(h, p)));
+  }
+  auto white = [&](cv::Point2d p) {
+    darkest_white = std::min(darkest_white, grey_at(image, apply(h, p)));
+    return darkest_white > brightest_black;
+  };
+  for (int i = 0; i < 8; ++i) {
+    const double r = 3 + (s - 6) * (i + 0.5) / 8;  // along the white ring
+    for (const cv::Point2d& p : {cv::Point2d(r, 3), cv::Point2d(s - 3, r), cv::Point2d(s - r, s - 3), cv::Point2d(3, s - r)})
+      if (!white(p)) return false;
+  }
+  return white(cv::Point2d(s / 2, s / 2));
 }
 
 }  // namespace
@@ -284,61 +382,174 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
                                std::vector<std::vector<cv::Point2d>>* hypotheses) {
   const Family& f = c.family;
   const int side = f.side();
+  const cv::Point2d middle(side / 2.0, side / 2.0);
   const std::array<int, 4> kc = f.keypoint_cells();
-  std::vector<cv::Point2f> observed(4);
-  for (int i = 0; i < 4; ++i) observed[i] = cv::Point2f(c.blobs[k.blob[i]].point);
+  const CellCentres& design = design_centres(f);
+  // K0, K1, K3, K2: around the marker, as the unit square's corners go.
+  const std::array<cv::Point2d, 4> observed = {c.blobs[k.blob[0]].point, c.blobs[k.blob[1]].point,
+                                               c.blobs[k.blob[3]].point, c.blobs[k.blob[2]].point};
   const double norm = std::sqrt(std::max(1.0, c.white_area));
 
-  std::vector<Decoding> tried;
+  // First what the blobs alone tell of each hypothesis: its homography, id, residual, worst
+  // cell, resolution and the squares' ink. The reading that wins is one of these, so when
+  // none of them passes the checks that need no grey level, no edge score or photometric
+  // test can make the side a marker: a grid of equal dots (the ink of every square alike,
+  // where the baseline's carries 16/9 of a data square's, or dots that fit no id) or a
+  // wrong side of a true marker stops here, before the grey-level work that costs most.
+  struct Reading {
+    Decoding d;
+    double residual = 0;
+    bool resolved = false, placed = false, passes = false;  // resolution; and cell residual; and ink
+  };
+  thread_local std::vector<Reading> readings;
+  thread_local CellCentres projected;
+  readings.clear();
+  // Hypotheses that read the same id from the same blobs refit the same homography: the
+  // refit and what follows from it are taken from the first of them.
+  struct Refit {
+    TagId id;
+    std::vector<int> cells;
+    std::size_t reading;  // the first reading with them, when its refit succeeded
+  };
+  std::vector<Refit> refits;
+  int resolved = 0, placed = 0, passing = 0;
   for (int hypothesis = 0; hypothesis < 16; ++hypothesis) {
     auto start = std::chrono::steady_clock::now();
     const int d2 = hypothesis / 4, d3 = hypothesis % 4;
-    const std::vector<cv::Point2f> units = {cv::Point2f(f.center(kc[0], 0)), cv::Point2f(f.center(kc[1], 0)),
-                                            cv::Point2f(f.center(kc[2], d2)), cv::Point2f(f.center(kc[3], d3))};
-    const cv::Mat hm = cv::getPerspectiveTransform(units, observed);
+    const auto hm = four_point_homography({design[kc[0]][0], design[kc[1]][0], design[kc[3]][d3], design[kc[2]][d2]},
+                                          observed);
     stats.hypotheses_ms += elapsed_ms(start);
-    if (hm.empty()) continue;
+    if (!hm) continue;
     start = std::chrono::steady_clock::now();
 
-    Decoding d;
-    d.homography = cv::Matx33d(hm);
-    if (!maps_marker(f, d.homography) || !assign_cells(c, k, d.homography, d)) {
+    Reading r;
+    Decoding& d = r.d;
+    d.homography = *hm;
+    if (!maps_marker(f, d.homography)) {
       stats.decode_ms += elapsed_ms(start);
       continue;
     }
-    read_digits(c, d);
+    project_centres(design, d.homography, projected);
+    if (!assign_cells(c, k, projected, d)) {
+      stats.decode_ms += elapsed_ms(start);
+      continue;
+    }
+    r.residual = read_digits(c, design, projected, d, f.n() == 2);
     // The four key points fix this homography; all n^2 blobs judge it. The marker's id
     // explains every centroid with one homography, a wrong hypothesis cannot.
-    if (f.n() > 2)
-      if (const auto h = refit(c, d); h && maps_marker(f, *h)) d.homography = *h;
-    const double residual = read_digits(c, d);
-    stats.decode_ms += elapsed_ms(start);
-
-    start = std::chrono::steady_clock::now();
-    d.edge_score = edge_gradient(image, camera, d.homography, 2, side - 2);
-    if (hypotheses) {
-      std::vector<cv::Point2d> outline;
-      for (const cv::Point2d& u : square(2, side - 2)) outline.push_back(apply(d.homography, u));
-      distort(camera, outline);
-      hypotheses->push_back(outline);
+    bool copied = false;
+    if (f.n() > 2) {
+      const auto same = std::find_if(refits.begin(), refits.end(),
+                                     [&](const Refit& e) { return e.id == d.id && e.cells == d.blob_of_cell; });
+      if (same != refits.end() && same->reading != std::size_t(-1)) {
+        r = readings[same->reading];
+        copied = true;
+      } else {
+        std::optional<cv::Matx33d> h;
+        if (same == refits.end()) h = refit(c, design, d);  // else it failed before
+        const bool fitted = h && maps_marker(f, *h);
+        if (same == refits.end())
+          refits.push_back({d.id, d.blob_of_cell, fitted ? readings.size() : std::size_t(-1)});
+        if (fitted) {
+          d.homography = *h;
+          project_centres(design, d.homography, projected);
+        }
+        r.residual = read_digits(c, design, projected, d, true);
+      }
     }
+    if (!copied) {
+      d.ink_spread = square_ink_spread(c, d);
+      r.resolved = smallest_scale(d.homography, middle) >= params.min_pixels_per_unit;
+      r.placed = r.resolved && d.worst_cell <= params.max_cell_residual;
+      r.passes = r.placed && d.ink_spread <= params.max_ink_spread;
+    }
+    resolved += r.resolved, placed += r.placed, passing += r.passes;
+    stats.decode_ms += elapsed_ms(start);
+    readings.push_back(r);
+  }
+  if (readings.empty()) return std::nullopt;
+
+  const auto outline_of = [&](const Decoding& d) {
+    std::vector<cv::Point2d> outline;
+    for (const cv::Point2d& u : square(2, side - 2)) outline.push_back(apply(d.homography, u));
+    distort(camera, outline);
+    return outline;
+  };
+  if (hypotheses)
+    for (const Reading& r : readings) hypotheses->push_back(outline_of(r.d));
+  // `clean`: a 2x2 reading known to be free of misordered pairs.
+  const auto score = [&](Reading& r, bool clean = false) {
+    const auto start = std::chrono::steady_clock::now();
+    r.d.edge_score = edge_gradient(image, camera, r.d.homography, 2, side - 2);
     stats.hypotheses_ms += elapsed_ms(start);
-    if (!(d.edge_score > 0)) continue;
     // 2x2: four blobs fix the homography exactly and leave no residual, so the grey
     // levels where the marker must be black or white decide.
-    d.error = f.n() == 2 ? misordered_pairs(f, d.id, d.homography, image, camera) : residual / norm / d.edge_score;
-    tried.push_back(d);
-  }
-  if (tried.empty()) return std::nullopt;
+    r.d.error = f.n() != 2 ? r.residual / norm / r.d.edge_score
+                : clean    ? 0.0
+                           : misordered_pairs(f, r.d.id, r.d.homography, image, camera);
+  };
+  const auto rejected = [&](Verdict verdict) {
+    // The reading reported (for the trace) is the one with the least residual, scored in
+    // full only when the trace asks for it.
+    const auto least = std::min_element(readings.begin(), readings.end(),
+                                        [](const Reading& a, const Reading& b) { return a.residual < b.residual; });
+    Decoding best = least->d;
+    best.verdict = verdict;
+    if (hypotheses) {
+      Reading scored = *least;
+      score(scored);
+      best.edge_score = scored.d.edge_score, best.error = scored.d.error;
+    }
+    return best;
+  };
   const auto better = [](const Decoding& a, const Decoding& b) {
     return a.error != b.error ? a.error < b.error : a.edge_score > b.edge_score;
   };
+
+  // 2x2 with tau3 at 0 (the default): a reading is accepted only when no grey level that
+  // must be white is as dark as one that must be black, and the brightest edge among such
+  // readings wins. Only they need the edge gradient.
+  std::vector<char> zero;
+  int zeros = 0;
+  if (f.n() == 2 && params.decode_threshold(f) == 0 && passing > 0) {
+    const auto start = std::chrono::steady_clock::now();
+    // Those that pass the checks above first: when none of them is clean, the best cannot
+    // be either.
+    zero.assign(readings.size(), 0);
+    passing = 0;
+    for (int round = 0; round < 2 && (round == 0 || passing > 0); ++round)
+      for (std::size_t i = 0; i < readings.size(); ++i)
+        if (readings[i].passes == (round == 0)) {
+          zero[i] = no_misordered_pair(f, design, readings[i].d.id, readings[i].d.homography, image, camera);
+          zeros += zero[i];
+          passing += zero[i] && readings[i].passes;
+        }
+    stats.hypotheses_ms += elapsed_ms(start);
+  }
+  // Rejected whichever reading the grey levels would make best: the verdict names the
+  // first check that no reading passed.
+  if (passing == 0)
+    return rejected(resolved == 0                      ? Verdict::resolution
+                    : placed == 0                      ? Verdict::residual
+                    : !zero.empty() && zeros == 0      ? Verdict::residual  // 2x2: tau3
+                                                       : Verdict::ink);
+
+  // Then the grey levels: the gradient along the projected inner border edge, and the
+  // decoding error of each hypothesis (2x2: of those free of misordered pairs, error 0).
+  std::vector<Decoding> tried;
+  for (std::size_t i = 0; i < readings.size(); ++i) {
+    if (!zero.empty() && !zero[i]) continue;
+    Reading& r = readings[i];
+    score(r, !zero.empty());
+    if (r.d.edge_score > 0) tried.push_back(r.d);
+  }
+  if (tried.empty()) return zero.empty() ? std::nullopt : std::optional<Decoding>(rejected(Verdict::residual));
   Decoding best = *std::min_element(tried.begin(), tried.end(), better);
 
   // Below about half a pixel per unit the 1 u shifts are under half a pixel and blur into
   // one another: a reading there can pass every check below and still be wrong (a 3x3
   // at 0.42 px per unit did, once in the range sweep), so it is not made.
-  if (smallest_scale(best.homography, cv::Point2d(side / 2.0, side / 2.0)) < params.min_pixels_per_unit) {
+  if (smallest_scale(best.homography, middle) < params.min_pixels_per_unit) {
     best.verdict = Verdict::resolution;
     return best;
   }
@@ -347,14 +558,14 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     best.verdict = Verdict::residual;
     return best;
   }
-  // Another id that fits almost as well makes the reading a guess.
+  // Another id that fits almost as well makes the reading a guess (never, for a 2x2
+  // reading free of misordered pairs: no error is below twice zero).
   for (const Decoding& d : tried)
     if (d.id != best.id && d.error < params.min_decode_margin * best.error) {
       best.verdict = Verdict::margin;
       return best;
     }
   best.verdict = Verdict::accepted;
-  best.ink_spread = square_ink_spread(c, best);
   return best;
 }
 

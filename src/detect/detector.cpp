@@ -48,6 +48,7 @@ void DetectorParams::validate() const {
   if (!(min_child_fraction >= 0 && min_child_fraction < 1)) fail("the minimum child fraction must be in [0, 1)");
   if (!(max_child_ratio >= 1)) fail("the maximum child ratio must be at least 1");
   if (max_second_looks < 0) fail("the number of second looks must not be negative");
+  if (max_candidates < 0) fail("the candidate budget must not be negative (0: no limit)");
   if (max_extra_children < 0 || max_extra_children > 64) fail("extra children must be 0 to 64");
   if (dilation < 0 || dilation > 8) fail("dilation must be 0 to 8 pixels");
   if (!(max_ink_ratio >= 1)) fail("the ink ratio (tau1) must be at least 1");
@@ -71,6 +72,7 @@ DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   frames += o.frames, regions += o.regions, topology += o.topology, area += o.area, geometry += o.geometry;
   angle += o.angle, collinearity += o.collinearity, residual += o.residual, unambiguous += o.unambiguous;
   decoded += o.decoded, second_looks += o.second_looks, second_look_found += o.second_look_found;
+  skipped_by_budget += o.skipped_by_budget, second_looks_skipped += o.second_looks_skipped;
   second_look_ms += o.second_look_ms;
   threshold_ms += o.threshold_ms, regions_ms += o.regions_ms, candidates_ms += o.candidates_ms;
   keypoints_ms += o.keypoints_ms, hypotheses_ms += o.hypotheses_ms, decode_ms += o.decode_ms, pose_ms += o.pose_ms;
@@ -156,6 +158,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
       else if (!d)
         stage = passed[1]                                      ? Stage::ink
                 : passed[0]                                    ? Stage::margin
+                : best->verdict == detail::Verdict::ink        ? Stage::ink
                 : best->verdict == detail::Verdict::resolution ? Stage::resolution
                                                                : Stage::decoding;
       CandidateVerdict v = verdict_of(c, second_look, stage);
@@ -192,6 +195,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
 const char* stage_name(Stage stage) {
   switch (stage) {
     case Stage::area: return "area";
+    case Stage::budget: return "budget";
     case Stage::geometry: return "geometry";
     case Stage::angle: return "angle";
     case Stage::collinearity: return "collinearity";
@@ -212,7 +216,7 @@ struct Detector::Impl {
   detail::BinaryImage binary;
   detail::RegionLabeller labeller;
   detail::RegionTree tree;
-  std::vector<detail::Candidate> candidates, area_rejected;
+  std::vector<detail::Candidate> candidates, area_rejected, skipped;
   // The second look's patch and its binary image and tree.
   detail::Patch patch;
   detail::BinaryImage patch_binary;
@@ -262,12 +266,20 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   s.labeller.label(s.binary, s.tree);
   stats.regions_ms = elapsed_ms(start);
 
+  // The candidates the frame may still examine, its own and its second looks'.
+  int budget = p.max_candidates;
+  int* const budget_left = p.max_candidates > 0 ? &budget : nullptr;
+  const auto record_rejected = [&](bool second_look) {
+    if (!trace) return;
+    for (const detail::Candidate& c : s.area_rejected) trace->verdicts.push_back(verdict_of(c, second_look, Stage::area));
+    for (const detail::Candidate& c : s.skipped) trace->verdicts.push_back(verdict_of(c, second_look, Stage::budget));
+  };
+
   start = Clock::now();
   detail::find_candidates(s.tree, s.binary, work, p, camera, s.candidates, stats, {},
-                          trace ? &s.area_rejected : nullptr);
+                          trace ? &s.area_rejected : nullptr, budget_left, trace ? &s.skipped : nullptr);
   stats.candidates_ms = elapsed_ms(start);
-  if (trace)
-    for (const detail::Candidate& c : s.area_rejected) trace->verdicts.push_back(verdict_of(c, false, Stage::area));
+  record_rejected(false);
 
   decode_candidates(s.candidates, work, camera, p, false, stats, trace, found);
 
@@ -279,9 +291,17 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
     for (const Detection& d : found)
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
     std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, look, taken);
-    if (int(boxes.size()) > p.max_second_looks) boxes.resize(p.max_second_looks);
+    if (int(boxes.size()) > p.max_second_looks) {
+      stats.second_looks_skipped += std::int64_t(boxes.size()) - p.max_second_looks;
+      boxes.resize(p.max_second_looks);
+    }
     stats.second_look_ms += elapsed_ms(start);
-    for (const cv::Rect& box : boxes) {
+    for (std::size_t i = 0; i < boxes.size(); ++i) {
+      if (budget_left && *budget_left <= 0) {  // spent: what the patches hold could not be examined
+        stats.second_looks_skipped += std::int64_t(boxes.size() - i);
+        break;
+      }
+      const cv::Rect& box = boxes[i];
       start = Clock::now();
       ++stats.second_looks;
       if (!detail::enlarge_patch(work, box, look, s.patch)) {
@@ -291,12 +311,11 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       detail::binarise_patch(s.patch, 0.5, s.patch_binary);
       s.labeller.label(s.patch_binary, s.patch_tree);
       detail::find_candidates(s.patch_tree, s.patch_binary, ImageView(s.patch.grey), p, camera, s.candidates, stats,
-                              s.patch.frame, trace ? &s.area_rejected : nullptr);
+                              s.patch.frame, trace ? &s.area_rejected : nullptr, budget_left,
+                              trace ? &s.skipped : nullptr);
       stats.second_look_ms += elapsed_ms(start);
-      if (trace) {
-        trace->second_looks.push_back(box);
-        for (const detail::Candidate& c : s.area_rejected) trace->verdicts.push_back(verdict_of(c, true, Stage::area));
-      }
+      if (trace) trace->second_looks.push_back(box);
+      record_rejected(true);
       decode_candidates(s.candidates, work, camera, p, true, stats, trace, found);
     }
   }

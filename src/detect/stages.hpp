@@ -20,6 +20,7 @@
 //   final pose (IPPE)         refine_pose, tag_size, camera     estimate_pose (pose.cpp)
 //   (not in the paper)        second_look, max_second_looks     near_candidates, enlarge_patch,
 //                                                               binarise_patch (second_look.cpp)
+//   (not in the paper)        max_candidates (the budget)       find_candidates (candidates.cpp)
 #pragma once
 
 #include <algorithm>
@@ -144,10 +145,16 @@ struct Candidate {
 // `image` and `binary` may be a patch of the frame (see PatchFrame): the candidates'
 // centroids, areas and inks are then given in the frame's pixels. Candidates that fail
 // the area constraint go to `area_rejected` when it is not null (for the trace).
+// `budget`, when not null, is the number of topological candidates the frame may still
+// examine (DetectorParams::max_candidates): when there are more, the most plausible are
+// examined (see DetectorParams), the budget is spent and the rest are counted into
+// stats.skipped_by_budget and listed in `skipped` when it is not null, unmeasured (their
+// blobs' centroids are the centres of their boxes).
 void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
                      const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
                      DetectionStats& stats, const PatchFrame& patch = {},
-                     std::vector<Candidate>* area_rejected = nullptr);
+                     std::vector<Candidate>* area_rejected = nullptr, int* budget = nullptr,
+                     std::vector<Candidate>* skipped = nullptr);
 
 // Centroid of the inverted grey image over `region` with its holes and the white pixels
 // within `reach` pixels of it that are nearer to it than to any other black pixel. `white` is the grey
@@ -201,9 +208,10 @@ double signed_angle(cv::Point2d a, cv::Point2d b);
 
 // ---------------------------------------------------------------- decode.cpp
 // How a decoding ended: rejected because the marker is too small to read, by tau3 or the
-// cell residual bound, because another id fits within the margin, or accepted (the ink
-// check comes after).
-enum class Verdict { resolution, residual, margin, accepted };
+// cell residual bound, because no hypothesis's squares' ink matches the design (checked
+// before the grey levels, when no hypothesis could pass it), because another id fits
+// within the margin, or accepted (the best reading's own ink check comes after).
+enum class Verdict { resolution, residual, ink, margin, accepted };
 
 struct Decoding {
   Verdict verdict = Verdict::accepted;
@@ -219,8 +227,12 @@ struct Decoding {
   double ink_spread = 0;
 };
 
-// Tries the 16 key point hypotheses and returns the best one with its verdict and, when
-// accepted, its ink spread; none when no hypothesis could be read at all.
+// Tries the 16 key point hypotheses and returns the best one with its verdict and its ink
+// spread; none when no hypothesis could be read at all. When no hypothesis passes the
+// checks that need no grey levels (resolution, cell residual, ink spread), the side is
+// rejected before the edge scores and decoding errors are computed: the reading returned
+// is then the one with the least residual, its error and edge score filled in only when
+// `hypotheses` is not null.
 // `hypotheses`, when not null, receives every hypothesis' projected inner edge.
 // Times the hypotheses and the decoding into `stats`.
 std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const ImageView& image, const Camera& camera,

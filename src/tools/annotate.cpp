@@ -329,6 +329,7 @@ void Annotator::build() {
   set(detect, "overlay", overlay.empty() ? "0" : overlay);
   set(detect, "threshold-window", std::to_string(o_.window));
   set(detect, "threshold-offset", std::to_string(o_.offset));
+  set(detect, "max-candidates", std::to_string(o_.max_candidates));
   if (!o_.calibration.empty()) g_object_set(detect, "calibration-file", o_.calibration.c_str(), nullptr);
   if (!std::isnan(o_.fx)) g_object_set(detect, "fx", o_.fx, "fy", std::isnan(o_.fy) ? o_.fx : o_.fy, nullptr);
   if (!std::isnan(o_.cx)) g_object_set(detect, "cx", o_.cx, nullptr);

@@ -8,6 +8,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "lftag/detector.hpp"
+
 namespace lftag::tools {
 
 // An option check: a finite number from lo to hi ("nan", "inf" and overflowing values fail,
@@ -28,9 +30,11 @@ struct DetectorOptions {
   std::string families = "3x3,4x4", calibration;
   double fx = NAN, fy = NAN, cx = NAN, cy = NAN, tag_size = 0.1;
   int window = 16, offset = 4;
+  int max_candidates = DetectorParams{}.max_candidates;
 };
-// Adds --family, --fx, --fy, --cx, --cy, --calibration, --tag-size, --threshold-window and
-// --threshold-offset to `cmd`, stored in `options` (which must outlive the parse).
+// Adds --family, --fx, --fy, --cx, --cy, --calibration, --tag-size, --threshold-window,
+// --threshold-offset and --max-candidates to `cmd`, stored in `options` (which must outlive
+// the parse).
 void add_detector_options(CLI::App* cmd, DetectorOptions& options);
 
 void add_generate_command(CLI::App& app, int& status);

@@ -22,7 +22,8 @@ nlohmann::json stats_json(const DetectionStats& s) {
            {{"regions", s.regions}, {"topology", s.topology}, {"area", s.area}, {"geometry", s.geometry},
             {"angle", s.angle}, {"collinearity", s.collinearity}, {"residual", s.residual},
             {"unambiguous", s.unambiguous}, {"decoded", s.decoded}, {"second_looks", s.second_looks},
-            {"second_look_found", s.second_look_found}}},
+            {"second_look_found", s.second_look_found}, {"skipped_by_budget", s.skipped_by_budget},
+            {"second_looks_skipped", s.second_looks_skipped}}},
           {"time_ms",
            {{"threshold", s.threshold_ms}, {"regions", s.regions_ms}, {"candidates", s.candidates_ms},
             {"keypoints", s.keypoints_ms}, {"hypotheses", s.hypotheses_ms}, {"decode", s.decode_ms},
@@ -65,6 +66,11 @@ void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
       ->check(CLI::Range(2, 1024));
   cmd->add_option("--threshold-offset", o.offset, "Grey levels below the mean for black (default 4)")
       ->check(CLI::Range(0, 255));
+  cmd->add_option("--max-candidates", o.max_candidates,
+                  "Candidates examined per image at most, the most plausible first; the rest are skipped and "
+                  "counted (--stats: skipped_by_budget). 0: no limit (default " +
+                      std::to_string(DetectorParams{}.max_candidates) + ")")
+      ->check(CLI::Range(0, 1 << 30));
 }
 
 void add_detect_command(CLI::App& app, int& status) {
@@ -77,10 +83,13 @@ void add_detect_command(CLI::App& app, int& status) {
   CLI::App* cmd = app.add_subcommand("detect", "Detect markers in images; prints one JSON object per image (JSON Lines).");
   cmd->add_option("images", opt->images, "Image files (PNG, JPEG and every format OpenCV reads)")->required();
   add_detector_options(cmd, *opt);
-  cmd->add_flag("--stats", opt->stats, "Add the candidate funnel and per-stage times to each object");
+  cmd->add_flag("--stats", opt->stats,
+                "Add the candidate funnel (with the candidates and second looks the budget skipped) and "
+                "per-stage times to each object");
   cmd->add_flag("--why", opt->why,
                 "Add \"candidates\": every topological candidate with the stage that stopped it (area, "
-                "geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or \"detected\"");
+                "budget, geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or "
+                "\"detected\"");
   cmd->add_option("--debug-dir", opt->debug_dir,
                   "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
   cmd->callback([opt, &status] {
@@ -90,6 +99,7 @@ void add_detect_command(CLI::App& app, int& status) {
       base.tag_size = opt->tag_size;
       base.threshold_window = opt->window;
       base.threshold_offset = opt->offset;
+      base.max_candidates = opt->max_candidates;
       if (!opt->calibration.empty()) {
         base.camera = Camera::load(opt->calibration);
       } else if (!std::isnan(opt->fx)) {
@@ -157,8 +167,10 @@ void add_detect_command(CLI::App& app, int& status) {
     if (opt->stats)
       std::cerr << "lftag detect: " << total.frames << " images, funnel " << total.topology << " -> " << total.area
                 << " -> " << total.geometry << " -> " << total.angle << " -> " << total.collinearity << " -> "
-                << total.residual << " -> " << total.unambiguous << " -> " << total.decoded << ", mean " << total.total_ms() / std::max<std::int64_t>(1, total.frames)
-                << " ms per image\n";
+                << total.residual << " -> " << total.unambiguous << " -> " << total.decoded << ", mean "
+                << total.total_ms() / std::max<std::int64_t>(1, total.frames) << " ms per image; over budget: "
+                << total.skipped_by_budget << " candidates and " << total.second_looks_skipped
+                << " second looks skipped\n";
     if (failed) std::cerr << "lftag detect: " << failed << " of " << opt->images.size() << " images failed\n";
     status = failed ? 1 : 0;
   });

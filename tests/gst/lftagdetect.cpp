@@ -1140,6 +1140,40 @@ GST_START_TEST(test_uncalibrated_warning) {
 }
 GST_END_TEST;
 
+// The per-frame budget: a property with the library's default; the first frame it cuts
+// posts one warning for the stream, later cuts none; frames within it, none.
+GST_START_TEST(test_budget_warning) {
+  GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
+  gint budget = 0;
+  g_object_get(e, "max-candidates", &budget, nullptr);
+  fail_unless_equals_int(budget, 128);  // DetectorParams::max_candidates
+  GParamSpec* spec = g_object_class_find_property(G_OBJECT_GET_CLASS(e), "max-candidates");
+  fail_unless(spec != nullptr && std::string(g_param_spec_get_blurb(spec)).find("budget") != std::string::npos);
+  gst_object_unref(e);
+
+  auto warnings = [](const std::string& properties) {
+    std::vector<GstMessage*> messages = run_to_eos(
+        "lftagtestsrc count=3 num-buffers=10 ! lftagdetect " + properties + " ! fakesink", GST_MESSAGE_WARNING);
+    for (GstMessage* m : messages) {
+      GError* error = nullptr;
+      gst_message_parse_warning(m, &error, nullptr);
+      fail_unless(std::string(error->message).find("max-candidates=1") != std::string::npos, "%s", error->message);
+      g_error_free(error);
+    }
+    return count_and_free(messages);
+  };
+  // Three markers a frame: a budget of one cuts all ten frames, and warns once.
+  fail_unless_equals_int(warnings("max-candidates=1"), 1);
+  fail_unless_equals_int(warnings(""), 0);
+  fail_unless_equals_int(warnings("max-candidates=0"), 0);
+
+  // The marker examined first is still found.
+  Frames frames;
+  pull_frames(frames, "lftagtestsrc count=3 num-buffers=1 ! lftagdetect max-candidates=1", nullptr, 1);
+  fail_unless_equals_int(detections_of(frames.buffers[0]).detections.size(), 1);
+}
+GST_END_TEST;
+
 // A frame that cannot be analysed passes on untouched; the next one is analysed.
 GST_START_TEST(test_bad_frame_passes) {
   Frames frames;
@@ -1365,6 +1399,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_calibration);
   tcase_add_test(tc, test_calibration_change_while_playing);
   tcase_add_test(tc, test_uncalibrated_warning);
+  tcase_add_test(tc, test_budget_warning);
   tcase_add_test(tc, test_bad_frame_passes);
   tcase_add_test(tc, test_late_frames);
   tcase_add_test(tc, test_late_frames_in_a_live_pipeline);

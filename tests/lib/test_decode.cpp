@@ -176,12 +176,14 @@ TEST(Decode, TheBaselineOnAnotherSideShowsInTheInkSpread) {
   // squares and vice versa, so their ink per design area is off by about (16/9)^2. With the
   // default bounds such turns do not even decode (the baseline centres fall half a unit off
   // the data grid), or their ink spread is over 3.
-  // With the residual bounds opened wide they decode, on a homography fitted to the wrong
-  // correspondences, and the ink spread still ranks the true turn first by a wide margin
-  // (what the detector relies on to pick the turn).
+  // With the residual and ink bounds opened wide they decode, on a homography fitted to the
+  // wrong correspondences, and the ink spread still ranks the true turn first by a wide
+  // margin (what the detector relies on to pick the turn; with the default ink bound no
+  // hypothesis of a wrong turn passes it, and decoding stops before the grey levels).
   DetectorParams open;
   open.max_cell_residual = 1.0;
   open.min_decode_margin = 1.0;
+  open.max_ink_spread = 1e9;
   for (int n = 2; n <= 8; ++n) open.max_decode_error[n] = 1e6;
   for (const auto& [n, id, ppu] : {std::tuple{3, TagId(6789), 5.3}, std::tuple{4, TagId(98765), 4.0},
                                    std::tuple{6, TagId(424242), 4.2}, std::tuple{2, TagId(7), 6.0},
@@ -208,6 +210,32 @@ TEST(Decode, TheBaselineOnAnotherSideShowsInTheInkSpread) {
       EXPECT_GT(o->ink_spread, 1.6 * right[1]->ink_spread) << what << " decodes as " << o->id.to_decimal();
     }
   }
+}
+
+TEST(Decode, SquaresOfEqualInkAreRejectedOnTheBlobsAlone) {
+  // Nine dots of equal ink (a tile of dots) where a marker has two baseline squares with
+  // 16/9 of a data square's ink: no hypothesis's squares match the design, so decoding
+  // stops before the grey levels, with the verdict "ink".
+  const auto p = prepare_raster(Family(3), 6789, 5.3);
+  ASSERT_TRUE(p);
+  Prepared q = *p;
+  for (detail::Blob& b : q.candidate.blobs) b.mass = 1000;
+  DetectionStats stats;
+  std::vector<std::vector<cv::Point2d>> hypotheses;
+  const auto d =
+      detail::decode(q.candidate, q.keypoints, ImageView(q.image), q.camera, DetectorParams{}, stats, &hypotheses);
+  ASSERT_TRUE(d);
+  EXPECT_EQ(d->verdict, detail::Verdict::ink);
+  EXPECT_EQ(d->id, TagId(6789));  // the reading reported: the blobs still sit where the id puts them
+  EXPECT_GT(d->ink_spread, DetectorParams{}.max_ink_spread);
+  EXPECT_GT(d->edge_score, 0);  // scored for the trace
+  EXPECT_EQ(hypotheses.size(), 16u);
+  // With the ink bound opened the same blobs read as before.
+  DetectorParams open;
+  open.max_ink_spread = 1e9;
+  const auto o = run(q, q.keypoints, open);
+  ASSERT_TRUE(o);
+  EXPECT_EQ(o->id, TagId(6789));
 }
 
 TEST(Decode, ABlobHalfwayBetweenTwoPositionsIsRejectedByTheCellResidual) {

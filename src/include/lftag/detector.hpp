@@ -66,6 +66,17 @@ struct DetectorParams {
   bool second_look = true;
   int max_second_looks = 64;  // patches per frame at most, the work bound of a cluttered frame
 
+  // -- Per-frame budget: at most this many topological candidates (white regions with
+  //    n^2 black children, in the frame and in its second looks together) are measured
+  //    and decoded; the rest are skipped and counted (DetectionStats::skipped_by_budget),
+  //    and once the budget is spent no further second look is taken. When a frame holds
+  //    more candidates than the budget left, the most plausible go first: the first
+  //    candidate of every enclosing black region (a marker's border holds one white
+  //    interior, the grout of a tiled wall thousands), fewest siblings first, before the
+  //    second of any region. Ordinary frames make a handful of candidates (photos: under
+  //    one a frame); a grid of dotted tiles makes thousands. 0: no limit.
+  int max_candidates = 128;
+
   // -- Candidates: a white region with at least n^2 black children. Children smaller than
   //    `min_child_fraction` of the white region's area, or than the largest child over
   //    `max_child_ratio`, are noise; at most n^2 + max_extra_children children remain, of
@@ -154,11 +165,14 @@ struct DetectionStats {
   std::int64_t geometry = 0;           // passed the geometry constraint
   std::int64_t angle = 0;              // passed the angle constraint
   std::int64_t collinearity = 0;       // passed the collinearity constraint
-  std::int64_t residual = 0;           // decoded within tau3 and the cell residual bound
+  std::int64_t residual = 0;           // decoded within tau3 and the cell residual bound (a side none of
+                                       // whose hypotheses match the squares' ink stops before)
   std::int64_t unambiguous = 0;        // no other id fitting within the decoding margin
   std::int64_t decoded = 0;            // the squares' ink matches the design: detections
   std::int64_t second_looks = 0;       // patches examined again (see DetectorParams::second_look)
   std::int64_t second_look_found = 0;  // detections made in them
+  std::int64_t skipped_by_budget = 0;  // candidates not decoded: DetectorParams::max_candidates was spent
+  std::int64_t second_looks_skipped = 0;  // clusters not looked at again: max_second_looks or the budget
   double threshold_ms = 0;             // binarisation
   double regions_ms = 0;               // topological connected components
   double candidates_ms = 0;            // topological filtering and vertex estimation
@@ -174,6 +188,7 @@ struct DetectionStats {
 // Where a topological candidate stopped, in pipeline order.
 enum class Stage {
   area,          // the area constraint (tau1)
+  budget,        // not examined: the frame's candidate budget was spent (max_candidates)
   geometry,      // the geometry constraint, on every side of the hull
   angle,         // the angle constraint
   collinearity,  // the collinearity constraint (tau2)
@@ -185,7 +200,7 @@ enum class Stage {
   duplicate,     // a marker already found at its place
   detected,
 };
-const char* stage_name(Stage stage);  // "area", ..., "detected"
+const char* stage_name(Stage stage);  // "area", "budget", ..., "detected"
 
 // One topological candidate and its fate (lftag detect --why prints these).
 struct CandidateVerdict {
