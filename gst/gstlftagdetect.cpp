@@ -222,7 +222,10 @@ struct Settings {
   std::string distortion_text;
   std::string calibration_file;
   bool tag_size_set = false;    /* a metric pose was asked for */
-  std::string families_error;   /* why the last families value was refused */
+  /* Values refused by name: "families \"9x9\": why". Set while the element runs, a
+   * refusal is a warning; one left from before the start fails it (the element had
+   * no bus to warn on). A good value of the property clears its refusal. */
+  std::string families_error, distortion_error;
   guint overlay = DEFAULT_PROP_OVERLAY;
   GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
   GstLFTagDetectLateFrames late_frames = DEFAULT_PROP_LATE_FRAMES;
@@ -611,8 +614,13 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
         if (text && *text)
           distortion = parse_distortion (text);
       } catch (const std::exception & e) {
-        g_warning ("%s: ignoring distortion \"%s\": %s", GST_OBJECT_NAME (self), text,
-            e.what ());
+        const std::string why = std::string ("\"") + text + "\": " + e.what ();
+        GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
+            ("Invalid distortion %s; the detector keeps its distortion.", why.c_str ()),
+            (nullptr));
+        GST_OBJECT_LOCK (self);
+        self->settings->distortion_error = why;
+        GST_OBJECT_UNLOCK (self);
         return;
       }
       break;
@@ -648,6 +656,7 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
       s.detector.cy = g_value_get_double (value);
       break;
     case PROP_DISTORTION:
+      s.distortion_error.clear ();
       s.distortion_text = distortion.empty () ? "" : text;
       s.detector.distortion = std::move (distortion);
       break;
@@ -801,9 +810,11 @@ gst_lftag_detect_start (GstBaseTransform * trans)
   self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
   GST_OBJECT_UNLOCK (self);
   st.messages.reset ();
-  if (!s.families_error.empty ()) {
-    GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS,
-        ("Invalid families %s.", s.families_error.c_str ()), (nullptr));
+  if (!s.families_error.empty () || !s.distortion_error.empty ()) {
+    GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS, ("Invalid %s %s.",
+            s.families_error.empty ()? "distortion" : "families",
+            (s.families_error.empty ()? s.distortion_error : s.families_error).c_str ()),
+        (nullptr));
     return FALSE;
   }
   st.warned_budget = false;

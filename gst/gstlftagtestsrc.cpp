@@ -154,6 +154,9 @@ using lftag::TagId;
 struct Settings {
   int family = DEFAULT_PROP_FAMILY;
   std::string ids_text;
+  /* Why the last ids value was refused: a warning when set while running; left from
+   * before the start (no bus to warn on yet), it fails the start. */
+  std::string ids_error;
   std::vector<TagId> ids;
   guint count = DEFAULT_PROP_COUNT;
   double tag_size = DEFAULT_PROP_TAG_SIZE;
@@ -430,8 +433,13 @@ gst_lftag_test_src_set_property (GObject * object, guint prop_id,
         if (text && *text)
           ids = lftag::parse_id_list (text, MAX_MARKERS);
       } catch (const std::exception & e) {
-        g_warning ("%s: ignoring ids \"%s\": %s", GST_OBJECT_NAME (self),
-            g_value_get_string (value), e.what ());
+        const std::string why = std::string ("\"") + g_value_get_string (value) + "\": " +
+            e.what ();
+        GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
+            ("Invalid ids %s; the markers keep their ids.", why.c_str ()), (nullptr));
+        GST_OBJECT_LOCK (self);
+        self->settings->ids_error = why;
+        GST_OBJECT_UNLOCK (self);
         return;
       }
       break;
@@ -446,6 +454,7 @@ gst_lftag_test_src_set_property (GObject * object, guint prop_id,
       s.family = g_value_get_enum (value);
       break;
     case PROP_IDS:
+      s.ids_error.clear ();
       s.ids_text = ids.empty () ? "" : g_value_get_string (value);
       s.ids = std::move (ids);
       break;
@@ -581,6 +590,11 @@ gst_lftag_test_src_start (GstBaseSrc * bsrc)
   const Settings s = gst_lftag_test_src_settings (self);
   State & st = *self->state;
 
+  if (!s.ids_error.empty ()) {
+    GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS, ("Invalid ids %s.", s.ids_error.c_str ()),
+        (nullptr));
+    return FALSE;
+  }
   try {
     resolve_ids (s);
   } catch (const std::exception & e) {

@@ -41,17 +41,24 @@ void paint(cv::Mat roi, const cv::Mat1b& alpha, const cv::Scalar& c) {
   }
 }
 
-// Text with a dark outline so that it reads on any background. The text is rasterised
-// once, anti-aliased, into a small mask and the outline grown from it: stroking every
-// glyph twice with thick anti-aliased lines took most of an overlaid frame's time.
-void label(cv::Mat& image, const std::string& text, cv::Point2d centre, double height, int width) {
+// Text with a dark outline so that it reads on any background, beside the marker (under
+// its lowest corner, or over its highest when there is no room below) so that a small
+// marker stays visible, and shifted to stay inside the frame (long 8x8 ids, markers at
+// the edge). The text is rasterised once, anti-aliased, into a small mask and the outline
+// grown from it: stroking every glyph twice with thick anti-aliased lines took most of an
+// overlaid frame's time.
+void label(cv::Mat& image, const std::string& text, const Detection& d, double height, int width) {
   const double scale = height / 22.0;
   const int thick = std::max(1, int(std::round(scale * 1.6)));
   int base = 0;
   const cv::Size size = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, scale, thick, &base);
-  // Centred on the marker, but shifted to stay inside the frame (long 8x8 ids, markers at the edge).
-  const int x = std::clamp(cvRound(centre.x - size.width / 2.0), 0, std::max(0, image.cols - size.width));
-  const int y = std::clamp(cvRound(centre.y + size.height / 2.0), size.height, std::max(size.height, image.rows - base));
+  double top = d.corners[0].y, bottom = d.corners[0].y;
+  for (const cv::Point2d& c : d.corners) top = std::min(top, c.y), bottom = std::max(bottom, c.y);
+  const int gap = 2 * width + thick + 1;
+  const double below = bottom + gap + size.height;                                   // baseline under the marker
+  const double baseline = below + base < image.rows ? below : top - gap - base;  // else over it
+  const int x = std::clamp(cvRound(d.center.x - size.width / 2.0), 0, std::max(0, image.cols - size.width));
+  const int y = std::clamp(cvRound(baseline), size.height, std::max(size.height, image.rows - base));
   const int pad = width + thick + 1;
   const cv::Rect box(x - pad, y - size.height - pad, size.width + 2 * pad, size.height + base + 2 * pad);
   const cv::Rect inside = box & cv::Rect(0, 0, image.cols, image.rows);
@@ -99,7 +106,7 @@ void draw_detections(cv::Mat& image, const std::vector<Detection>& detections, c
         line(image, p[0], p[1], colour(image, 0, 0, 255), width + 1);  // x red
       }
     }
-    if (o.id) label(image, d.family.name() + ":" + d.id.to_decimal(), d.center, text, width);
+    if (o.id) label(image, d.family.name() + ":" + d.id.to_decimal(), d, text, width);
   }
 }
 

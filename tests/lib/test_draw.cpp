@@ -63,7 +63,45 @@ cv::Rect reach(const Detection& d, int margin) {
   return cv::Rect(cv::Point(int(x0) - margin, int(y0) - margin), cv::Point(int(x1) + margin + 1, int(y1) + margin + 1));
 }
 
+// Where the label may be: a band of text height 13.3 px (480 / 36) under the marker's
+// lowest corner, as wide as the frame, grown by a margin.
+cv::Rect label_box(const Detection& d, int cols, int rows) {
+  double bottom = -1e9;
+  for (const cv::Point2d& c : d.corners) bottom = std::max(bottom, c.y);
+  return cv::Rect(0, int(bottom), cols, 40) & cv::Rect(0, 0, cols, rows);
+}
+
 }  // namespace
+
+TEST(DrawDetections, TheLabelSitsBesideTheMarkerInsideTheFrame) {
+  // A small marker (40 px): the label leaves its inside untouched, under it, or over it at
+  // the foot of the frame; at the frame's edges it stays whole inside the frame.
+  DrawOptions id_only;
+  id_only.outline = false, id_only.axes = false;
+  auto small_at = [](double x, double y) {
+    Detection d = detection_at(x, y, {0, 0, 0});
+    for (cv::Point2d& c : d.corners) c = d.center + (c - d.center) * 0.4;
+    return d;
+  };
+  auto corner_box = [](const Detection& d) {
+    std::vector<cv::Point2f> p(d.corners.begin(), d.corners.end());
+    return cv::boundingRect(p);
+  };
+  for (const cv::Point2d& at : {cv::Point2d(320, 200), cv::Point2d(320, 470), cv::Point2d(5, 240), cv::Point2d(635, 10)}) {
+    const Detection d = small_at(at.x, at.y);
+    cv::Mat1b image(480, 640, uchar(100));
+    draw_detections(image, {d}, kCamera, id_only);
+    const cv::Mat1b mask = image != 100;
+    SCOPED_TRACE("marker at " + std::to_string(at.x) + ", " + std::to_string(at.y));
+    const cv::Rect inside = corner_box(d) & cv::Rect(0, 0, 640, 480);
+    EXPECT_EQ(cv::countNonZero(mask(inside)), 0) << "the label covers the marker";
+    const cv::Rect drawn = cv::boundingRect(mask);
+    ASSERT_GT(drawn.area(), 0);
+    EXPECT_GT(drawn.width, 50) << "the label was cut by the frame's edge";  // "3x3:6789" is ~90 px wide
+    if (at.y < 400) EXPECT_GE(drawn.y, inside.br().y) << "under the marker";
+    else EXPECT_LE(drawn.br().y, inside.y) << "over the marker, at the frame's foot";
+  }
+}
 
 TEST(DrawDetections, ChangesPixelsAtTheMarkerAndNowhereElse) {
   const Detection d = detection_at(200, 180);
@@ -78,11 +116,10 @@ TEST(DrawDetections, ChangesPixelsAtTheMarkerAndNowhereElse) {
       const cv::Point2d mid = (d.corners[i] + d.corners[(i + 1) % 4]) * 0.5;
       EXPECT_GT(cv::countNonZero(mask(cv::Rect(int(mid.x) - 2, int(mid.y) - 2, 5, 5))), 0) << "side " << i;
     }
-    // Something at the centre (the label).
-    EXPECT_GT(cv::countNonZero(mask(cv::Rect(int(d.center.x) - 10, int(d.center.y) - 10, 21, 21))), 0);
-    // Nothing far away: outside the marker, its axes and its label, grown by 15 px.
+    // Nothing far away: outside the marker, its axes and its label (under it), grown by 15 px.
     cv::Mat1b outside = mask.clone();
     outside(reach(d, 15) & cv::Rect(0, 0, 640, 480)).setTo(0);
+    outside(label_box(d, 640, 480)).setTo(0);
     EXPECT_EQ(cv::countNonZero(outside), 0);
     EXPECT_GT(cv::countNonZero(mask), 200);
   }

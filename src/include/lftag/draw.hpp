@@ -15,7 +15,7 @@ namespace lftag {
 
 struct DrawOptions {
   bool outline = true;  // the marker's outer border
-  bool id = true;       // family and id at the centre
+  bool id = true;       // family and id beside the marker (under it, or over it at the frame's foot)
   bool axes = true;     // x red, y green, z blue, one tag size long
   // Line width and text size in pixels; 0 picks them from the image size.
   double line_width = 0;
