@@ -159,7 +159,7 @@ gst_lftag_detect_overlay_get_type (void)
 {
   static const GFlagsValue values[] = {
     {GST_LFTAG_DETECT_OVERLAY_OUTLINE, "The outer border of each marker", "outline"},
-    {GST_LFTAG_DETECT_OVERLAY_ID, "Family and id at the marker's centre", "id"},
+    {GST_LFTAG_DETECT_OVERLAY_ID, "Family and id beside the marker (under it)", "id"},
     {GST_LFTAG_DETECT_OVERLAY_AXES,
         "Axes: x red, y green, z blue, one tag size long", "axes"},
     {0, nullptr, nullptr},

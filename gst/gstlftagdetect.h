@@ -13,7 +13,8 @@ G_DECLARE_FINAL_TYPE (GstLFTagDetect, gst_lftag_detect, GST, LFTAG_DETECT, GstVi
 /**
  * GstLFTagDetectOverlay:
  * @GST_LFTAG_DETECT_OVERLAY_OUTLINE: the outer border of each marker
- * @GST_LFTAG_DETECT_OVERLAY_ID: family and id at the marker's centre
+ * @GST_LFTAG_DETECT_OVERLAY_ID: family and id beside the marker (under it, over it
+ *     at the foot of the frame), inside the frame
  * @GST_LFTAG_DETECT_OVERLAY_AXES: the marker's axes, x red, y green, z blue,
  *     one tag size long (a metric pose: see calibration-file)
  *
