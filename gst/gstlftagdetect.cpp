@@ -97,6 +97,8 @@
 
 #include "detectmessages.h"
 #include "elementcamera.h"
+#include "detectmetas.h"
+#include "detectoverlay.h"
 #include "lftagmeta.h"
 #include "propertystate.h"
 
@@ -182,11 +184,6 @@ gst_lftag_detect_late_frames_get_type (void)
   return type;
 }
 
-/* The overlay layer is handed to GStreamer as its native ARGB, which is BGRA in
- * memory (OpenCV's channel order) only on little-endian machines. */
-#if G_BYTE_ORDER != G_LITTLE_ENDIAN
-#error "lftagdetect's overlay assumes a little-endian machine"
-#endif
 
 namespace {
 
@@ -250,8 +247,9 @@ struct State {
   cv::Mat1f luma_weights;               /* set_info(): packed formats, per byte of a pixel */
   double luma_scale = 0;                /* set_info(): 16-bit luma planes, to 8 bits */
   cv::Mat1b luma;                       /* packed and 16-bit formats: reused */
-  cv::Mat4b layer;                      /* the overlay, transparent BGRA: reused */
-  cv::Mat1b alpha;                      /* the layer's alpha, where it is searched */
+  lftag::gst::DetectOverlay overlay;
+  bool ask_downstream = true;           /* whether it takes overlay compositions */
+  bool attach_composition = false;      /* its answer: attach, else blend */
   std::optional<lftag::Detector> detector;
   DetectorSettings built, rejected;     /* the detector's settings; a set that failed */
   bool warned_uncalibrated = false;
@@ -347,22 +345,6 @@ luma_scale (const GstVideoFormatInfo * finfo)
   return 1.0 / double (1 << (bits - 8));
 }
 
-/* The pixels of a detection: its outer corners' bounding box, clipped to the frame. */
-cv::Rect
-bounding_box (const Detection & d, int width, int height)
-{
-  double x0 = G_MAXDOUBLE, y0 = G_MAXDOUBLE, x1 = -G_MAXDOUBLE, y1 = -G_MAXDOUBLE;
-  for (const cv::Point2d & p : d.corners) {
-    x0 = std::min (x0, p.x), x1 = std::max (x1, p.x);
-    y0 = std::min (y0, p.y), y1 = std::max (y1, p.y);
-  }
-  /* Pixel i spans [i - 0.5, i + 0.5). */
-  const int left = std::max (0, int (std::floor (x0 + 0.5)));
-  const int top = std::max (0, int (std::floor (y0 + 0.5)));
-  const int right = std::min (width - 1, int (std::floor (x1 + 0.5)));
-  const int bottom = std::min (height - 1, int (std::floor (y1 + 0.5)));
-  return cv::Rect (left, top, std::max (0, right - left + 1), std::max (0, bottom - top + 1));
-}
 
 }  // namespace
 
@@ -373,6 +355,7 @@ struct _GstLFTagDetect
   Settings *settings;
   State *state;
   Lateness lateness;            /* under the object lock */
+  gint downstream_changed;      /* atomic: a reconfigure event came from downstream */
 };
 
 static void gst_lftag_detect_set_property (GObject * object, guint prop_id,
@@ -838,7 +821,8 @@ gst_lftag_detect_stop (GstBaseTransform * trans)
   st.calibration.reset ();
   st.detector.reset ();
   st.luma.release ();
-  st.layer.release ();
+  st.overlay.reset ();
+  st.ask_downstream = true;
   return TRUE;
 }
 
@@ -865,7 +849,8 @@ gst_lftag_detect_set_info (GstVideoFilter * filter, GstCaps *, GstVideoInfo * in
   st.luma_weights = luma_weights (in_info->finfo);
   st.luma_scale = luma_scale (in_info->finfo);
   st.luma.release ();
-  st.layer.release ();
+  st.overlay.reset ();
+  st.ask_downstream = true;
   return TRUE;
 }
 
@@ -924,124 +909,51 @@ gst_lftag_detect_luma (State & st, GstVideoFrame * frame)
   return lftag::ImageView (st.luma);
 }
 
-/* Removes what an earlier analysis of this buffer attached (a second LFTagMeta
- * would hide behind the first); returns the next free region-of-interest id. */
-static gint
-gst_lftag_detect_clear_metas (GstBuffer * buffer)
-{
-  struct Scan {
-    GQuark lftag = g_quark_from_static_string ("lftag");
-    gint next_id = 0;
-  } scan;
-
-  gst_buffer_foreach_meta (buffer,[](GstBuffer *, GstMeta ** meta, gpointer data) -> gboolean {
-    Scan & scan = *static_cast < Scan * >(data);
-    if ((*meta)->info == lftag::gst::detection_meta_info ()) {
-      *meta = nullptr;
-    } else if ((*meta)->info->api == GST_VIDEO_REGION_OF_INTEREST_META_API_TYPE) {
-      auto *roi = reinterpret_cast < GstVideoRegionOfInterestMeta * >(*meta);
-      if (roi->roi_type == scan.lftag)
-        *meta = nullptr;
-      else
-        scan.next_id = std::max (scan.next_id, roi->id + 1);
-    }
-    return TRUE;
-  }, &scan);
-  return scan.next_id;
-}
-
+/* The overlay: attached as a GstVideoOverlayCompositionMeta when downstream said
+ * in the allocation query that it draws them (the frame is then not written, and
+ * a frame shared with a tee is not copied), blended into the frame otherwise. */
 static void
-gst_lftag_detect_add_metas (GstBuffer * buffer, const GstVideoInfo * info,
-    const std::vector<Detection> & detections)
+gst_lftag_detect_draw (GstLFTagDetect * self, GstBuffer * buffer, const GstVideoInfo * info,
+    const Settings & s, const Camera & camera, const std::vector<Detection> & detections)
 {
-  const int width = GST_VIDEO_INFO_WIDTH (info), height = GST_VIDEO_INFO_HEIGHT (info);
-  const gint first_id = gst_lftag_detect_clear_metas (buffer);
-
-  lftag::gst::add_detection_meta (buffer, width, height, detections);
-  for (std::size_t i = 0; i < detections.size (); ++i) {
-    const cv::Rect box = bounding_box (detections[i], width, height);
-    GstVideoRegionOfInterestMeta *roi =
-        gst_buffer_add_video_region_of_interest_meta (buffer, "lftag", box.x, box.y,
-        box.width, box.height);
-    roi->id = first_id + gint (i);
-    roi->parent_id = -1;
-    GstStructure *param = lftag::gst::detection_structure (detections[i]);
-    gst_structure_set_name (param, "lftag");
-    gst_video_region_of_interest_meta_add_param (roi, param);
+  State & st = *self->state;
+  GstPad *srcpad = GST_BASE_TRANSFORM_SRC_PAD (self);
+  if (g_atomic_int_compare_and_exchange (&self->downstream_changed, 1, 0))
+    st.ask_downstream = true;
+  if (st.ask_downstream) {
+    GstCaps *caps = gst_pad_get_current_caps (srcpad);
+    st.attach_composition = lftag::gst::downstream_takes_compositions (srcpad, caps);
+    if (caps)
+      gst_caps_unref (caps);
+    st.ask_downstream = false;
+    GST_DEBUG_OBJECT (self, "the overlay is %s", st.attach_composition ?
+        "attached as a GstVideoOverlayCompositionMeta" : "blended into the frames");
   }
-}
-
-/* Where the layer was drawn on: near the marker (`near`) if the drawing stays
- * inside it, else anywhere (a long label, long axes). */
-static cv::Rect
-drawn_extent (const cv::Mat4b & layer, cv::Mat1b & alpha, const cv::Rect & near)
-{
-  const cv::Rect all (0, 0, layer.cols, layer.rows);
-  const cv::Rect window = near & all;
-  cv::extractChannel (layer (window), alpha, 3);
-  const cv::Rect box = cv::boundingRect (alpha) + window.tl ();
-  const bool inside = !box.empty ()
-      && (box.x > window.x || window.x == 0) && (box.y > window.y || window.y == 0)
-      && (box.br ().x < window.br ().x || window.br ().x == all.br ().x)
-      && (box.br ().y < window.br ().y || window.br ().y == all.br ().y);
-  if (inside || window == all)
-    return box;
-  cv::extractChannel (layer, alpha, 3);
-  return cv::boundingRect (alpha);
-}
-
-/* A copy of part of the layer as an overlay rectangle at its place in the frame. */
-static GstVideoOverlayRectangle *
-overlay_rectangle (const cv::Mat4b & layer, const cv::Rect & box)
-{
-  GstBuffer *pixels = gst_buffer_new_allocate (nullptr, gsize (box.area ()) * 4, nullptr);
-  gst_buffer_add_video_meta (pixels, GST_VIDEO_FRAME_FLAG_NONE,
-      GST_VIDEO_OVERLAY_COMPOSITION_FORMAT_RGB, box.width, box.height);
-  GstMapInfo map;
-  gst_buffer_map (pixels, &map, GST_MAP_WRITE);
-  layer (box).copyTo (cv::Mat4b (box.height, box.width, reinterpret_cast < cv::Vec4b * >(map.data)));
-  gst_buffer_unmap (pixels, &map);
-  /* Anti-aliased strokes on a transparent layer come out with premultiplied alpha. */
-  GstVideoOverlayRectangle *rectangle = gst_video_overlay_rectangle_new_raw (pixels,
-      box.x, box.y, box.width, box.height,
-      GST_VIDEO_OVERLAY_FORMAT_FLAG_PREMULTIPLIED_ALPHA);
-  gst_buffer_unref (pixels);
-  return rectangle;
-}
-
-/* Draws each marker onto a transparent layer, takes what was drawn as an overlay
- * rectangle of its own (so that only the markers' surroundings are blended, not
- * the span between them) and blends them all into the frame. */
-static void
-gst_lftag_detect_draw (State & st, GstVideoFrame * frame, const Settings & s,
-    const Camera & camera, const std::vector<Detection> & detections)
-{
-  const int width = GST_VIDEO_FRAME_WIDTH (frame), height = GST_VIDEO_FRAME_HEIGHT (frame);
-  if (st.layer.empty ())
-    st.layer = cv::Mat4b::zeros (height, width);
 
   lftag::DrawOptions options;
   options.outline = s.overlay & GST_LFTAG_DETECT_OVERLAY_OUTLINE;
   options.id = s.overlay & GST_LFTAG_DETECT_OVERLAY_ID;
   options.axes = s.overlay & GST_LFTAG_DETECT_OVERLAY_AXES;
-
-  GstVideoOverlayComposition *composition = gst_video_overlay_composition_new (nullptr);
-  for (const Detection & d : detections) {
-    cv::Mat layer = st.layer;
-    lftag::draw_detections (layer, {d}, camera, options);
-    const cv::Rect corners = bounding_box (d, width, height);
-    const int margin = std::max ({corners.width, corners.height, std::min (width, height) / 8});
-    const cv::Rect near (corners.x - margin, corners.y - margin,
-        corners.width + 2 * margin, corners.height + 2 * margin);
-    const cv::Rect box = drawn_extent (st.layer, st.alpha, near);
-    if (box.empty ())
-      continue;
-    GstVideoOverlayRectangle *rectangle = overlay_rectangle (st.layer, box);
-    gst_video_overlay_composition_add_rectangle (composition, rectangle);
-    gst_video_overlay_rectangle_unref (rectangle);
-    st.layer (box).setTo (cv::Scalar::all (0));
+  GstVideoOverlayComposition *composition = nullptr;
+  try {
+    composition = st.overlay.compose (GST_VIDEO_INFO_WIDTH (info),
+        GST_VIDEO_INFO_HEIGHT (info), options, camera, detections);
+  } catch (const std::exception & e) {
+    GST_WARNING_OBJECT (self, "overlay failed: %s", e.what ());
+    st.overlay.reset ();        /* it may hold a half-drawn frame */
+    return;
   }
-  gst_video_overlay_composition_blend (composition, frame);
+  if (st.attach_composition) {
+    lftag::gst::attach_composition (buffer, composition);
+  } else {
+    GstVideoFrame frame;
+    if (gst_video_frame_map (&frame, info, buffer, GST_MAP_READWRITE)) {
+      gst_video_overlay_composition_blend (composition, &frame);
+      gst_video_frame_unmap (&frame);
+    } else {
+      GST_WARNING_OBJECT (self, "cannot map %" GST_PTR_FORMAT " to draw on it", buffer);
+    }
+  }
   gst_video_overlay_composition_unref (composition);
 }
 
@@ -1070,17 +982,11 @@ gst_lftag_detect_src_event (GstBaseTransform * trans, GstEvent * event)
     GST_OBJECT_LOCK (self);
     self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
     GST_OBJECT_UNLOCK (self);
+  } else if (GST_EVENT_TYPE (event) == GST_EVENT_RECONFIGURE) {
+    /* A new sink may draw compositions where the last one did not, or not. */
+    g_atomic_int_set (&self->downstream_changed, 1);
   }
   return GST_BASE_TRANSFORM_CLASS (parent_class)->src_event (trans, event);
-}
-
-/* The meta of a frame passed on without analysis: no detections, "analysed" FALSE. */
-static void
-gst_lftag_detect_add_unanalysed_meta (GstBuffer * buffer, const GstVideoInfo * info)
-{
-  gst_lftag_detect_clear_metas (buffer);
-  lftag::gst::add_detection_meta (buffer, GST_VIDEO_INFO_WIDTH (info),
-      GST_VIDEO_INFO_HEIGHT (info), {}, false);
 }
 
 /* Whether downstream's last QoS report makes this buffer late. */
@@ -1112,7 +1018,8 @@ gst_lftag_detect_skip_late (GstLFTagDetect * self, GstBuffer * buffer,
 {
   State & st = *self->state;
   ++st.skipped;
-  gst_lftag_detect_add_unanalysed_meta (buffer, info);
+  lftag::gst::attach_unanalysed (buffer, GST_VIDEO_INFO_WIDTH (info),
+      GST_VIDEO_INFO_HEIGHT (info));
 
   const GstSegment *segment = &GST_BASE_TRANSFORM (self)->segment;
   const GstClockTime pts = GST_BUFFER_PTS (buffer);
@@ -1166,7 +1073,8 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
   if (!gst_video_frame_map (&frame, info, buffer, GST_MAP_READ)) {
     GST_WARNING_OBJECT (self, "cannot map %" GST_PTR_FORMAT ", passed on unanalysed",
         buffer);
-    gst_lftag_detect_add_unanalysed_meta (buffer, info);
+    lftag::gst::attach_unanalysed (buffer, GST_VIDEO_INFO_WIDTH (info),
+      GST_VIDEO_INFO_HEIGHT (info));
     return GST_FLOW_OK;
   }
   std::vector<Detection> detections;
@@ -1177,7 +1085,8 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
     gst_video_frame_unmap (&frame);
     GST_WARNING_OBJECT (self, "detection failed on %" GST_PTR_FORMAT
         ", passed on unanalysed: %s", buffer, e.what ());
-    gst_lftag_detect_add_unanalysed_meta (buffer, info);
+    lftag::gst::attach_unanalysed (buffer, GST_VIDEO_INFO_WIDTH (info),
+      GST_VIDEO_INFO_HEIGHT (info));
     return GST_FLOW_OK;
   }
   gst_video_frame_unmap (&frame);
@@ -1196,21 +1105,11 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
     st.warned_budget = true;
   }
 
-  gst_lftag_detect_add_metas (buffer, info, detections);
+  lftag::gst::attach_detections (buffer, GST_VIDEO_INFO_WIDTH (info),
+      GST_VIDEO_INFO_HEIGHT (info), detections);
 
-  if (s.overlay && !detections.empty ()) {
-    if (gst_video_frame_map (&frame, info, buffer, GST_MAP_READWRITE)) {
-      try {
-        gst_lftag_detect_draw (st, &frame, s, camera, detections);
-      } catch (const std::exception & e) {
-        GST_WARNING_OBJECT (self, "overlay failed: %s", e.what ());
-        st.layer.release ();    /* it may hold a half-drawn frame */
-      }
-      gst_video_frame_unmap (&frame);
-    } else {
-      GST_WARNING_OBJECT (self, "cannot map %" GST_PTR_FORMAT " to draw on it", buffer);
-    }
-  }
+  if (s.overlay && !detections.empty ())
+    gst_lftag_detect_draw (self, buffer, info, s, camera, detections);
 
   if (GstMessage * message = st.messages.frame (GST_OBJECT (self), s.messages,
           GST_BASE_TRANSFORM (self)->segment, buffer, GST_VIDEO_INFO_WIDTH (info),

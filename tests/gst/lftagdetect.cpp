@@ -470,6 +470,64 @@ GST_START_TEST(test_overlay) {
 }
 GST_END_TEST;
 
+// A sink that draws overlay compositions (it lists the meta in its allocation answer)
+// gets the overlay as a GstVideoOverlayCompositionMeta and untouched pixels; one that
+// does not gets it blended. Both draw the same pixels.
+GST_START_TEST(test_overlay_composition_meta) {
+  Frames frames;
+  pull_frames(frames, "lftagtestsrc num-buffers=1 count=2 speed=0", "video/x-raw,format=I420", 1);
+  GstBuffer* in = frames.buffers[0];
+  const Pixels original(in, frames.info);
+
+  GstHarness* blending = detector("overlay=outline+id", frames.info);
+  GstBuffer* blended = gst_harness_push_and_pull(blending, gst_buffer_ref(in));
+  fail_unless(gst_buffer_get_video_overlay_composition_meta(blended) == nullptr);
+  fail_if(Pixels(blended, frames.info) == original, "nothing was blended");
+
+  GstHarness* attaching = detector("overlay=outline+id", frames.info);
+  gst_harness_add_propose_allocation_meta(attaching, GST_VIDEO_OVERLAY_COMPOSITION_META_API_TYPE, nullptr);
+  GstBuffer* attached = gst_harness_push_and_pull(attaching, gst_buffer_ref(in));
+  GstVideoOverlayCompositionMeta* meta = gst_buffer_get_video_overlay_composition_meta(attached);
+  fail_unless(meta != nullptr, "no composition meta for a sink that takes them");
+  fail_unless_equals_int(gst_video_overlay_composition_n_rectangles(meta->overlay), 2);  // one per marker
+  fail_unless(Pixels(attached, frames.info) == original, "the frame was written");
+  fail_unless_equals_int(detections_of(attached).detections.size(), 2);
+
+  // Blending the attached composition gives the blended frame.
+  GstBuffer* copy = gst_buffer_copy_deep(in);
+  GstVideoFrame frame;
+  fail_unless(gst_video_frame_map(&frame, &frames.info, copy, GST_MAP_READWRITE));
+  fail_unless(gst_video_overlay_composition_blend(meta->overlay, &frame));
+  gst_video_frame_unmap(&frame);
+  fail_unless(Pixels(copy, frames.info) == Pixels(blended, frames.info));
+
+  // An upstream composition stays, under ours.
+  GstBuffer* with_upstream = gst_buffer_copy(in);
+  GstBuffer* pixels = gst_buffer_new_allocate(nullptr, 16 * 16 * 4, nullptr);
+  gst_buffer_add_video_meta(pixels, GST_VIDEO_FRAME_FLAG_NONE, GST_VIDEO_OVERLAY_COMPOSITION_FORMAT_RGB, 16, 16);
+  GstVideoOverlayRectangle* theirs = gst_video_overlay_rectangle_new_raw(pixels, 0, 0, 16, 16,
+                                                                         GST_VIDEO_OVERLAY_FORMAT_FLAG_NONE);
+  GstVideoOverlayComposition* upstream = gst_video_overlay_composition_new(theirs);
+  gst_buffer_add_video_overlay_composition_meta(with_upstream, upstream);
+  GstBuffer* both = gst_harness_push_and_pull(attaching, with_upstream);
+  meta = gst_buffer_get_video_overlay_composition_meta(both);
+  fail_unless(meta != nullptr);
+  fail_unless_equals_int(gst_video_overlay_composition_n_rectangles(meta->overlay), 3);
+  gint x, y;
+  guint w, h;
+  gst_video_overlay_rectangle_get_render_rectangle(gst_video_overlay_composition_get_rectangle(meta->overlay, 0), &x,
+                                                   &y, &w, &h);
+  fail_unless(x == 0 && y == 0 && w == 16 && h == 16, "upstream's rectangle is not first");
+
+  gst_video_overlay_composition_unref(upstream);
+  gst_video_overlay_rectangle_unref(theirs);
+  gst_buffer_unref(pixels);
+  for (GstBuffer* b : {blended, attached, copy, both}) gst_buffer_unref(b);
+  gst_harness_teardown(blending);
+  gst_harness_teardown(attaching);
+}
+GST_END_TEST;
+
 // videoconvert and videoscale keep the LFTagMeta as it was and scale the boxes.
 GST_START_TEST(test_metas_after_convert_and_scale) {
   const std::string source =
@@ -1390,6 +1448,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_shared_buffer);
   tcase_add_test(tc, test_tee);
   tcase_add_test(tc, test_overlay);
+  tcase_add_test(tc, test_overlay_composition_meta);
   tcase_add_test(tc, test_metas_after_convert_and_scale);
   tcase_add_test(tc, test_region_metas);
   tcase_add_test(tc, test_region_clipped);
