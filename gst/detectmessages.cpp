@@ -5,7 +5,7 @@
 #include <cmath>
 #include <iterator>
 
-#include "lftagmeta.h"
+#include "metaconversion.h"
 
 GType
 gst_lftag_detect_messages_get_type (void)

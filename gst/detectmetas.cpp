@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "lftagmeta.h"
+#include "metaconversion.h"
 
 namespace lftag::gst {
 namespace {

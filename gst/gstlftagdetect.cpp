@@ -99,7 +99,7 @@
 #include "elementcamera.h"
 #include "detectmetas.h"
 #include "detectoverlay.h"
-#include "lftagmeta.h"
+#include "metaconversion.h"
 #include "propertystate.h"
 
 GST_DEBUG_CATEGORY_STATIC (gst_lftag_detect_debug);

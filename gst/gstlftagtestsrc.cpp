@@ -50,7 +50,7 @@
 #include <lftag/tag_id.hpp>
 
 #include "elementcamera.h"
-#include "lftagmeta.h"
+#include "metaconversion.h"
 #include "markermotion.h"
 #include "propertystate.h"
 

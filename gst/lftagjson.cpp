@@ -2,7 +2,7 @@
 #include "lftagjson.h"
 
 #include "json.hpp"  // src/tools: the JSON of a detection
-#include "lftagmeta.h"
+#include "metaconversion.h"
 
 namespace lftag::gst {
 namespace {

@@ -5,7 +5,7 @@
 #include "gstlftagdetect.h"
 #include "gstlftagpublish.h"
 #include "gstlftagtestsrc.h"
-#include "lftagmeta.h"
+#include "metaconversion.h"
 
 static gboolean
 plugin_init (GstPlugin * plugin)

@@ -14,7 +14,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "detectmessages.h"
-#include "lftagmeta.h"
+#include "metaconversion.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
 #include "frames.hpp"

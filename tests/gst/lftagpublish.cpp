@@ -14,7 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "json.hpp"
-#include "lftagmeta.h"
+#include "metaconversion.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
 

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
-#include "lftagmeta.h"
+#include "metaconversion.h"
 
 #include <algorithm>
 #include <array>

@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "lftagmeta.h"
+#include "metaconversion.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
 
@@ -292,8 +292,8 @@ GST_START_TEST(test_malformed_rejected)
 }
 GST_END_TEST;
 
-static Suite* lftagmeta_suite(void) {
-  Suite* s = suite_create("lftagmeta");
+static Suite* metaconversion_suite(void) {
+  Suite* s = suite_create("metaconversion");
   TCase* tc = tcase_create("general");
   suite_add_tcase(s, tc);
   tcase_add_test(tc, test_registered_without_tags);
@@ -306,4 +306,4 @@ static Suite* lftagmeta_suite(void) {
   return s;
 }
 
-LFTAG_CHECK_MAIN(lftagmeta)
+LFTAG_CHECK_MAIN(metaconversion)
