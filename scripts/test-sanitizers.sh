@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The sanitizer builds, with clang:
-#   build-sanitize  AddressSanitizer + UndefinedBehaviorSanitizer:
+#   build-sanitize  AddressSanitizer + UndefinedBehaviorSanitizer (and the fuzz targets):
 #                   every test of the plain build except the valgrind suite `leaks`
-#                   (valgrind cannot run ASan programs; see tests/gst/meson.build)
+#                   (valgrind cannot run ASan programs; see tests/gst/meson.build), plus
+#                   every checked-in fuzz input once through its target (suite `fuzz`)
 #   build-tsan      ThreadSanitizer: only the tests of the suite `threads` (several
 #                   detectors at once, properties changed while frames flow)
 # Each is configured once and built incrementally. Any sanitizer report fails its test
