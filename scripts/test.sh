@@ -14,7 +14,8 @@ meson test -C build --print-errorlogs "$@"
 logs=(build/meson-logs)
 failed=0
 if [ $# -eq 0 ] && [ "${LFTAG_SANITIZERS:-1}" != 0 ]; then
-  rm -f build-sanitize/fuzz-logs/testlog.junit.xml
+  # No log of an earlier run may count: a build that fails now leaves none.
+  rm -f build-sanitize/meson-logs/testlog.* build-tsan/meson-logs/testlog.* build-sanitize/fuzz-logs/testlog.*
   scripts/test-sanitizers.sh
   [ $? -eq 2 ] && failed=$((failed + 1))  # a build failed: no log counts it
   logs+=(build-sanitize/meson-logs build-tsan/meson-logs)
