@@ -5,7 +5,11 @@
 //   for (const lftag::Detection& d : detector.detect(lftag::ImageView(grey)))
 //     std::cout << d.family.name() << " " << d.id.to_decimal() << "\n";
 //
-// A Detector keeps its working buffers from frame to frame; use one per thread.
+// Threads: a Detector keeps its working buffers from frame to frame and detect() writes
+// them, so one Detector must never be used from two threads at once without external
+// locking (a mutex around every detect() call). Use one Detector per thread: building one
+// is cheap, and different Detectors share no mutable state, so they may detect at the same
+// time (tests/lib/test_threads.cpp checks this under ThreadSanitizer).
 #pragma once
 
 #include <array>
@@ -234,7 +238,9 @@ class Detector {
   const DetectorParams& params() const;
 
   // Detects markers. Throws std::invalid_argument for an empty (0 x 0) image, a null
-  // pointer or a stride shorter than the width. `stats` and `trace` are filled when not null.
+  // pointer or a stride shorter than the width, and for a frame the camera's calibration
+  // cannot be scaled to (Camera::for_frame). `stats` and `trace` are filled when not null.
+  // Not thread-safe on one Detector (see the top of this file); `image` is only read.
   std::vector<Detection> detect(const ImageView& image, DetectionStats* stats = nullptr,
                                 DetectionTrace* trace = nullptr);
 
