@@ -6,7 +6,7 @@
 // tsan-glib.c shows the sanitizer GLib's locks.
 #include <string>
 
-#include "lftagmeta.h"
+#include "metaconversion.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
 
