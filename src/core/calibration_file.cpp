@@ -531,7 +531,10 @@ std::pair<std::string, const Value*> first_of(const Entries& entries, std::initi
 
 Camera to_camera(const Entries& entries) {
   Camera cam;
-  const auto [k_key, k_value] = first_of(entries, {"camera_matrix", "cameraMatrix"});
+  // Named variables, not structured bindings: C++17 lambdas cannot capture those (clang).
+  const auto k_entry = first_of(entries, {"camera_matrix", "cameraMatrix"});
+  const std::string& k_key = k_entry.first;
+  const Value* k_value = k_entry.second;
   if (!k_value)
     fail("no 'camera_matrix' (or 'cameraMatrix') entry, expected an OpenCV calibration with camera_matrix and "
          "distortion_coefficients");
@@ -548,7 +551,9 @@ Camera to_camera(const Entries& entries) {
       std::abs(a[1]) > tiny * std::abs(a[0]))
     fail("the camera matrix '" + k_key + "' is not of the form [fx 0 cx; 0 fy cy; 0 0 1] (skew is not supported)");
 
-  const auto [d_key, d_value] = first_of(entries, {"distortion_coefficients", "distCoeffs"});
+  const auto d_entry = first_of(entries, {"distortion_coefficients", "distCoeffs"});
+  const std::string& d_key = d_entry.first;
+  const Value* d_value = d_entry.second;
   if (d_value) {
     const Matrix d = matrix(d_key, *d_value, [&](long long rows, long long cols) {
       const long long n = rows * cols;  // both at most 2^53: the product only matters when one is 1
