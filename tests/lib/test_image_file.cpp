@@ -71,7 +71,7 @@ std::vector<unsigned char> huge_tiff() {
 }
 
 std::vector<unsigned char> huge_webp() {
-  std::vector<unsigned char> b(30, 0);
+  std::vector<unsigned char> b(32, 0);
   std::copy_n("RIFF", 4, b.begin()), std::copy_n("WEBPVP8X", 8, b.begin() + 8);
   put_le32(b, 4, 22), put_le32(b, 16, 10);
   put_le32(b, 24, 19999), put_le32(b, 27, 19999);  // 24-bit sizes minus one (the second overwrites a zero byte)
