@@ -4,24 +4,14 @@
 // A parsed id must print back to itself, in decimal and in hexadecimal, and a list must
 // hold no more ids than allowed.
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <stdexcept>
 #include <string_view>
 
+#include "check.hpp"
 #include "lftag/family.hpp"
 #include "lftag/tag_id.hpp"
 
-namespace {
-
-void check(bool ok, const char* what) {
-  if (!ok) {
-    std::fprintf(stderr, "%s\n", what);
-    std::abort();
-  }
-}
-
-}  // namespace
+using lftag::fuzz::check;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string_view text(reinterpret_cast<const char*>(data), size);
