@@ -219,9 +219,7 @@ struct Settings {
   std::string distortion_text;
   std::string calibration_file;
   bool tag_size_set = false;    /* a metric pose was asked for */
-  /* Values refused by name: "families \"9x9\": why". Set while the element runs, a
-   * refusal is a warning; one left from before the start fails it (the element had
-   * no bus to warn on). A good value of the property clears its refusal. */
+  /* Refused values (lftag::gst::refuse_value), until a good value clears them. */
   std::string families_error, distortion_error;
   guint overlay = DEFAULT_PROP_OVERLAY;
   GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
@@ -567,7 +565,7 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
   std::vector<Family> families;
   std::vector<double> distortion;
   const gchar *text = nullptr;
-  std::string families_text, families_error;
+  std::string families_text;
 
   /* Text is parsed outside the lock; bad text is refused and changes nothing. */
   switch (prop_id) {
@@ -581,12 +579,10 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
         for (const Family & f : families)
           families_text += (families_text.empty () ? "" : ",") + f.name ();
       } catch (const std::exception & e) {
-        families_error = std::string ("\"") + text + "\": " + e.what ();
-        GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
-            ("Invalid families %s; the detector keeps its families.",
-                families_error.c_str ()), (nullptr));
+        const std::string refusal = lftag::gst::refuse_value (GST_ELEMENT (self),
+            "families", text, e.what ());
         GST_OBJECT_LOCK (self);
-        self->settings->families_error = families_error;
+        self->settings->families_error = refusal;
         GST_OBJECT_UNLOCK (self);
         return;
       }
@@ -597,12 +593,10 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
         if (text && *text)
           distortion = parse_distortion (text);
       } catch (const std::exception & e) {
-        const std::string why = std::string ("\"") + text + "\": " + e.what ();
-        GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
-            ("Invalid distortion %s; the detector keeps its distortion.", why.c_str ()),
-            (nullptr));
+        const std::string refusal = lftag::gst::refuse_value (GST_ELEMENT (self),
+            "distortion", text, e.what ());
         GST_OBJECT_LOCK (self);
-        self->settings->distortion_error = why;
+        self->settings->distortion_error = refusal;
         GST_OBJECT_UNLOCK (self);
         return;
       }
@@ -793,13 +787,9 @@ gst_lftag_detect_start (GstBaseTransform * trans)
   self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
   GST_OBJECT_UNLOCK (self);
   st.messages.reset ();
-  if (!s.families_error.empty () || !s.distortion_error.empty ()) {
-    GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS, ("Invalid %s %s.",
-            s.families_error.empty ()? "distortion" : "families",
-            (s.families_error.empty ()? s.distortion_error : s.families_error).c_str ()),
-        (nullptr));
+  if (!lftag::gst::no_refused_values (GST_ELEMENT (self), {&s.families_error,
+              &s.distortion_error}))
     return FALSE;
-  }
   st.warned_budget = false;
   if (s.calibration_file.empty ())
     return TRUE;

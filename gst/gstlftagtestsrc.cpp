@@ -154,8 +154,7 @@ using lftag::TagId;
 struct Settings {
   int family = DEFAULT_PROP_FAMILY;
   std::string ids_text;
-  /* Why the last ids value was refused: a warning when set while running; left from
-   * before the start (no bus to warn on yet), it fails the start. */
+  /* A refused ids value (lftag::gst::refuse_value), until a good value clears it. */
   std::string ids_error;
   std::vector<TagId> ids;
   guint count = DEFAULT_PROP_COUNT;
@@ -433,12 +432,10 @@ gst_lftag_test_src_set_property (GObject * object, guint prop_id,
         if (text && *text)
           ids = lftag::parse_id_list (text, MAX_MARKERS);
       } catch (const std::exception & e) {
-        const std::string why = std::string ("\"") + g_value_get_string (value) + "\": " +
-            e.what ();
-        GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
-            ("Invalid ids %s; the markers keep their ids.", why.c_str ()), (nullptr));
+        const std::string refusal = lftag::gst::refuse_value (GST_ELEMENT (self), "ids",
+            g_value_get_string (value), e.what ());
         GST_OBJECT_LOCK (self);
-        self->settings->ids_error = why;
+        self->settings->ids_error = refusal;
         GST_OBJECT_UNLOCK (self);
         return;
       }
@@ -590,11 +587,8 @@ gst_lftag_test_src_start (GstBaseSrc * bsrc)
   const Settings s = gst_lftag_test_src_settings (self);
   State & st = *self->state;
 
-  if (!s.ids_error.empty ()) {
-    GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS, ("Invalid ids %s.", s.ids_error.c_str ()),
-        (nullptr));
+  if (!lftag::gst::no_refused_values (GST_ELEMENT (self), {&s.ids_error}))
     return FALSE;
-  }
   try {
     resolve_ids (s);
   } catch (const std::exception & e) {

@@ -19,4 +19,20 @@ gboolean property_settable_now(GstElement* element, GParamSpec* pspec) {
   return FALSE;
 }
 
+std::string refuse_value(GstElement* element, const char* property, const char* value, const std::string& why) {
+  const std::string refusal = std::string(property) + " \"" + (value ? value : "") + "\": " + why;
+  GST_ELEMENT_WARNING(element, RESOURCE, SETTINGS, ("Invalid %s; the previous value stays.", refusal.c_str()),
+                      (nullptr));
+  return refusal;
+}
+
+gboolean no_refused_values(GstElement* element, std::initializer_list<const std::string*> refusals) {
+  for (const std::string* refusal : refusals)
+    if (!refusal->empty()) {
+      GST_ELEMENT_ERROR(element, RESOURCE, SETTINGS, ("Invalid %s.", refusal->c_str()), (nullptr));
+      return FALSE;
+    }
+  return TRUE;
+}
+
 }  // namespace lftag::gst
