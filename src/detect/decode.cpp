@@ -162,41 +162,60 @@ std::vector<cv::Point2d> square(double a, double b) {
 }
 
 
-// For 2x2, where the four blobs fix the homography and leave no residual: the fraction of
-// (should-be-white, should-be-black) sample pairs whose grey levels are in the wrong order.
-// Black: the square centres and the middle of the border; white: the middle of the white
-// ring inside the border and the middle of the cross between the squares.
-// With `any_only`, returns 0 when there is none and 1 when there is any (no count, no sort).
-double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
-                        const Camera& camera, bool any_only = false) {
+// For 2x2, where the four blobs fix the homography and leave no residual: the grey levels
+// where reading `id` under h must be black (the square centres and the middle of the
+// border) and white (the middle of the white ring inside the border and the middle of the
+// cross between the squares). Filled into reused buffers: this runs for every hypothesis.
+struct Photometry {
+  std::vector<cv::Point2d> black_units, white_units, pixels;
+  std::vector<double> black, white;
+};
+Photometry& photometry(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
+                       const Camera& camera) {
+  thread_local Photometry m;
   const double s = f.side();
-  std::vector<cv::Point2d> black_units = f.centers(id), white_units;
+  m.black_units.clear(), m.white_units.clear();
+  for (int g = 0; g < f.cell_count(); ++g) m.black_units.push_back(f.center(g, f.is_baseline(g) ? 0 : id.digit(f.data_index(g))));
   for (int i = 0; i < 8; ++i) {
     const double t = 1 + (s - 2) * (i + 0.5) / 8;  // along the border's middle line
     for (const cv::Point2d& p : {cv::Point2d(t, 1), cv::Point2d(s - 1, t), cv::Point2d(s - t, s - 1), cv::Point2d(1, s - t)})
-      black_units.push_back(p);
+      m.black_units.push_back(p);
     const double r = 3 + (s - 6) * (i + 0.5) / 8;  // along the white ring
     for (const cv::Point2d& p : {cv::Point2d(r, 3), cv::Point2d(s - 3, r), cv::Point2d(s - r, s - 3), cv::Point2d(3, s - r)})
-      white_units.push_back(p);
+      m.white_units.push_back(p);
   }
-  white_units.emplace_back(s / 2, s / 2);
-  auto grey = [&](const std::vector<cv::Point2d>& units) {
-    std::vector<cv::Point2d> pixels;
-    for (const cv::Point2d& u : units) pixels.push_back(apply(h, u));
-    distort(camera, pixels);
-    std::vector<double> out;
-    for (const cv::Point2d& p : pixels) out.push_back(grey_at(image, p));
-    return out;
+  m.white_units.emplace_back(s / 2, s / 2);
+  auto grey = [&](const std::vector<cv::Point2d>& units, std::vector<double>& out) {
+    m.pixels.clear();
+    for (const cv::Point2d& u : units) m.pixels.push_back(apply(h, u));
+    distort(camera, m.pixels);
+    out.clear();
+    for (const cv::Point2d& p : m.pixels) out.push_back(grey_at(image, p));
   };
-  std::vector<double> b = grey(black_units);
-  const std::vector<double> w = grey(white_units);
-  if (any_only) return *std::min_element(w.begin(), w.end()) <= *std::max_element(b.begin(), b.end()) ? 1.0 : 0.0;
+  grey(m.black_units, m.black);
+  grey(m.white_units, m.white);
+  return m;
+}
+
+// The fraction of (should-be-white, should-be-black) sample pairs whose grey levels are in
+// the wrong order.
+double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
+                        const Camera& camera) {
+  Photometry& m = photometry(f, id, h, image, camera);
   // For each white sample, the black samples at least as bright (sorted: n log n, where
   // every pair was n^2).
-  std::sort(b.begin(), b.end());
+  std::sort(m.black.begin(), m.black.end());
   std::size_t wrong = 0;
-  for (double wv : w) wrong += std::size_t(b.end() - std::lower_bound(b.begin(), b.end(), wv));
-  return double(wrong) / (w.size() * b.size());
+  for (double wv : m.white) wrong += std::size_t(m.black.end() - std::lower_bound(m.black.begin(), m.black.end(), wv));
+  return double(wrong) / (m.white.size() * m.black.size());
+}
+
+// Whether no sample that must be white is as dark as one that must be black (the
+// misordered pairs are none).
+bool no_misordered_pair(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
+                        const Camera& camera) {
+  const Photometry& m = photometry(f, id, h, image, camera);
+  return *std::min_element(m.white.begin(), m.white.end()) > *std::max_element(m.black.begin(), m.black.end());
 }
 
 // See Decoding::ink_spread.
@@ -347,34 +366,6 @@ std::optional<cv::Matx33d> refit(const Candidate& c, const CellCentres& design, 
   return fit_homography(units, points);
 }
 
-// For 2x2 (see misordered_pairs): whether no sample that must be white is as dark as one
-// that must be black. The same samples in the same order as misordered_pairs, without its
-// allocations, and stopping at the first white sample that is too dark.
-bool no_misordered_pair(const Family& f, const CellCentres& design, TagId id, const cv::Matx33d& h,
-                        const ImageView& image, const Camera& camera) {
-  if (camera.has_distortion()) return misordered_pairs(f, id, h, image, camera, true) == 0;
-  const double s = f.side();
-  double darkest_white = HUGE_VAL, brightest_black = -HUGE_VAL;
-  for (int g = 0; g < f.cell_count(); ++g)
-    brightest_black = std::max(
-        brightest_black, grey_at(image, apply(h, design[g][f.is_baseline(g) ? 0 : id.digit(f.data_index(g))])));
-  for (int i = 0; i < 8; ++i) {
-    const double t = 1 + (s - 2) * (i + 0.5) / 8;  // along the border's middle line
-    for (const cv::Point2d& p : {cv::Point2d(t, 1), cv::Point2d(s - 1, t), cv::Point2d(s - t, s - 1), cv::Point2d(1, s - t)})
-      brightest_black = std::max(brightest_black, grey_at(image, apply(h, p)));
-  }
-  auto white = [&](cv::Point2d p) {
-    darkest_white = std::min(darkest_white, grey_at(image, apply(h, p)));
-    return darkest_white > brightest_black;
-  };
-  for (int i = 0; i < 8; ++i) {
-    const double r = 3 + (s - 6) * (i + 0.5) / 8;  // along the white ring
-    for (const cv::Point2d& p : {cv::Point2d(r, 3), cv::Point2d(s - 3, r), cv::Point2d(s - r, s - 3), cv::Point2d(3, s - r)})
-      if (!white(p)) return false;
-  }
-  return white(cv::Point2d(s / 2, s / 2));
-}
-
 }  // namespace
 
 std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const ImageView& image, const Camera& camera,
@@ -520,7 +511,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     for (int round = 0; round < 2 && (round == 0 || passing > 0); ++round)
       for (std::size_t i = 0; i < readings.size(); ++i)
         if (readings[i].passes == (round == 0)) {
-          zero[i] = no_misordered_pair(f, design, readings[i].d.id, readings[i].d.homography, image, camera);
+          zero[i] = no_misordered_pair(f, readings[i].d.id, readings[i].d.homography, image, camera);
           zeros += zero[i];
           passing += zero[i] && readings[i].passes;
         }
