@@ -52,10 +52,10 @@ nlohmann::json verdict_json(const CandidateVerdict& v) {
 
 void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
   cmd->add_option("--family", o.families, "Families to detect, comma-separated (default 3x3,4x4)");
-  cmd->add_option("--fx", o.fx, "Focal length in pixels (x)")->check(finite_in(1e-3, 1e7));
-  cmd->add_option("--fy", o.fy, "Focal length in pixels (y; default fx)")->check(finite_in(1e-3, 1e7));
-  cmd->add_option("--cx", o.cx, "Principal point x (default: image centre)")->check(finite_in(-1e7, 1e7));
-  cmd->add_option("--cy", o.cy, "Principal point y (default: image centre)")->check(finite_in(-1e7, 1e7));
+  cmd->add_option("--fx", o.fx, "Focal length in pixels (x)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
+  cmd->add_option("--fy", o.fy, "Focal length in pixels (y; default fx)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
+  cmd->add_option("--cx", o.cx, "Principal point x (default: image centre)")->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
+  cmd->add_option("--cy", o.cy, "Principal point y (default: image centre)")->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
   cmd->add_option("--calibration", o.calibration,
                   "OpenCV calibration file (YAML/XML/JSON: camera_matrix + distortion_coefficients, or "
                   "cameraMatrix + distCoeffs). Without a camera, poses assume fx = image width and are "

@@ -73,10 +73,10 @@ void add_render_command(CLI::App& app, int& status) {
       "render", "Render a synthetic camera frame of markers (PNG) with its ground truth (JSON).");
   cmd->add_option("--width", opt->width, "Frame width in pixels (default 640)")->check(CLI::PositiveNumber);
   cmd->add_option("--height", opt->height, "Frame height in pixels (default 480)")->check(CLI::PositiveNumber);
-  cmd->add_option("--fx", opt->fx, "Focal length in pixels along x (default 320)")->check(finite_in(1e-3, 1e7));
-  cmd->add_option("--fy", opt->fy, "Focal length in pixels along y (default 320)")->check(finite_in(1e-3, 1e7));
-  cmd->add_option("--cx", opt->cx, "Principal point x (default: frame centre)")->check(finite_in(-1e7, 1e7));
-  cmd->add_option("--cy", opt->cy, "Principal point y (default: frame centre)")->check(finite_in(-1e7, 1e7));
+  cmd->add_option("--fx", opt->fx, "Focal length in pixels along x (default 320)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
+  cmd->add_option("--fy", opt->fy, "Focal length in pixels along y (default 320)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
+  cmd->add_option("--cx", opt->cx, "Principal point x (default: frame centre)")->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
+  cmd->add_option("--cy", opt->cy, "Principal point y (default: frame centre)")->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
   cmd->add_option("--distortion", opt->distortion, "Distortion k1,k2,p1,p2[,k3]")->delimiter(',');
   cmd->add_option("--calibration", opt->calibration,
                   "OpenCV calibration file (YAML/XML); replaces the camera options");
