@@ -53,6 +53,8 @@
  *                                   position, marker units (0.35 is the limit)
  *   edge-score         gdouble      mean gradient along the inner border edge
  *   reprojection-error gdouble      RMS of the final pose over the centroids, pixels
+ *   from-outline       gboolean     read from the grey levels under its aligned outline
+ *                                   (far or blurred; decode-error and worst-cell are 0)
  * Truth only:
  *   centers            n^2 points   exact projected centres of the black squares
  *   fully-visible      gboolean     in front of the camera and wholly inside the frame
@@ -98,6 +100,7 @@ G_BEGIN_DECLS
 #define LFTAG_FIELD_DECODE_ERROR "decode-error"
 #define LFTAG_FIELD_WORST_CELL "worst-cell"
 #define LFTAG_FIELD_EDGE_SCORE "edge-score"
+#define LFTAG_FIELD_FROM_OUTLINE "from-outline"
 #define LFTAG_FIELD_REPROJECTION_ERROR "reprojection-error"
 #define LFTAG_FIELD_CENTERS "centers"
 #define LFTAG_FIELD_FULLY_VISIBLE "fully-visible"

@@ -234,6 +234,7 @@ GstStructure* detection_structure(const Detection& d) {
                     LFTAG_FIELD_DECODE_ERROR, G_TYPE_DOUBLE, d.decode_error,
                     LFTAG_FIELD_WORST_CELL, G_TYPE_DOUBLE, d.worst_cell,
                     LFTAG_FIELD_EDGE_SCORE, G_TYPE_DOUBLE, d.edge_score,
+                    LFTAG_FIELD_FROM_OUTLINE, G_TYPE_BOOLEAN, gboolean(d.from_outline),
                     LFTAG_FIELD_REPROJECTION_ERROR, G_TYPE_DOUBLE, d.reprojection_error, nullptr);
   return s;
 }
@@ -298,6 +299,8 @@ Detection detection_from_structure(const GstStructure* s) {
   // Optional: structures from before it was added read as 0.
   if (!gst_structure_get_double(s, LFTAG_FIELD_WORST_CELL, &d.worst_cell)) d.worst_cell = 0;
   d.edge_score = get_double(s, LFTAG_FIELD_EDGE_SCORE);
+  gboolean from_outline = FALSE;  // optional, as worst-cell
+  if (gst_structure_get_boolean(s, LFTAG_FIELD_FROM_OUTLINE, &from_outline)) d.from_outline = from_outline;
   d.reprojection_error = get_double(s, LFTAG_FIELD_REPROJECTION_ERROR);
   return d;
 }
