@@ -386,7 +386,9 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
       GST_PARAM_MUTABLE_PLAYING);
   const auto ready = GParamFlags (G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS |
       GST_PARAM_MUTABLE_READY);
-  const lftag::DetectorParams defaults;
+  /* Static: GCC 12 takes the empty optional camera of a local one for uninitialised
+   * (-Wmaybe-uninitialized) when class_init inlines its destructor. */
+  static const lftag::DetectorParams defaults;
 
   GST_DEBUG_CATEGORY_INIT (gst_lftag_detect_debug, "lftagdetect", 0,
       "LFTag marker detector");
@@ -1048,7 +1050,7 @@ gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
     return GST_FLOW_OK;
   }
 
-  const Camera & camera = st.detector->params ().camera;
+  const Camera & camera = *st.detector->params ().camera;    /* always given */
   const bool metric = (s.overlay & GST_LFTAG_DETECT_OVERLAY_AXES) || s.tag_size_set;
   if (metric && !camera.calibrated && !st.warned_uncalibrated) {
     GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
