@@ -61,7 +61,10 @@
  * #GstLFTagDetect:fx and friends. Without either, markers are still found and
  * decoded, poses assume a default camera (fx = fy = frame width, centred) and
  * are marked "calibrated" FALSE, and the element warns once per stream when a
- * metric pose is wanted (axes drawn, or tag-size set).
+ * metric pose is wanted (axes drawn, or tag-size set). "Not set" is a value no
+ * camera has: 0 for fx and fy, -1 for cx and cy (which take 0 as the first pixel
+ * column or row, not as the centre). fy, cx, cy and distortion count only with
+ * fx, and the element warns when it ignores one that is set.
  *
  * ## Example launch lines
  * |[
@@ -133,8 +136,8 @@ enum
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
 #define DEFAULT_PROP_TAG_SIZE 0.1
 #define DEFAULT_PROP_CALIBRATION_FILE nullptr
-#define DEFAULT_PROP_FOCAL 0.0
-#define DEFAULT_PROP_PRINCIPAL 0.0
+#define DEFAULT_PROP_FOCAL lftag::gst::kUnsetFocal
+#define DEFAULT_PROP_PRINCIPAL lftag::gst::kUnsetPrincipal
 #define DEFAULT_PROP_DISTORTION nullptr
 #define DEFAULT_PROP_OVERLAY 0
 #define DEFAULT_PROP_MESSAGES GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS
@@ -195,8 +198,7 @@ using lftag::Family;
 struct DetectorSettings {
   std::vector<Family> families;
   double tag_size = DEFAULT_PROP_TAG_SIZE;
-  double fx = DEFAULT_PROP_FOCAL, fy = DEFAULT_PROP_FOCAL;
-  double cx = DEFAULT_PROP_PRINCIPAL, cy = DEFAULT_PROP_PRINCIPAL;
+  std::optional<double> fx, fy, cx, cy;       /* empty: not set */
   std::vector<double> distortion;
   int threshold_window = 0, threshold_offset = 0;
   bool second_look = true;
@@ -220,7 +222,7 @@ struct Settings {
   std::string calibration_file;
   bool tag_size_set = false;    /* a metric pose was asked for */
   /* Refused values (lftag::gst::refuse_value), until a good value clears them. */
-  std::string families_error, distortion_error;
+  std::string families_error, distortion_error, cx_error, cy_error;
   guint overlay = DEFAULT_PROP_OVERLAY;
   GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
   GstLFTagDetectLateFrames late_frames = DEFAULT_PROP_LATE_FRAMES;
@@ -417,21 +419,27 @@ gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
           DEFAULT_PROP_CALIBRATION_FILE, ready));
   g_object_class_install_property (gobject_class, PROP_FX,
       g_param_spec_double ("fx", "Focal length x",
-          "Horizontal focal length in pixels, for poses. 0: no camera given; poses "
-          "then assume fx = fy = frame width, centred, and are marked uncalibrated",
-          0.0, 1e6, DEFAULT_PROP_FOCAL, playing));
+          "Horizontal focal length in pixels, for poses. 0 (the default) is \"not set\": "
+          "poses then assume fx = fy = frame width, centred, and are marked uncalibrated",
+          0.0, lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, playing));
   g_object_class_install_property (gobject_class, PROP_FY,
       g_param_spec_double ("fy", "Focal length y",
-          "Vertical focal length in pixels (0: equal to fx)",
-          0.0, 1e6, DEFAULT_PROP_FOCAL, playing));
+          "Vertical focal length in pixels, with fx. 0 (the default) is \"not set\": equal to fx",
+          0.0, lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, playing));
   g_object_class_install_property (gobject_class, PROP_CX,
       g_param_spec_double ("cx", "Principal point x",
-          "Principal point x in pixels, pixel centres at integers (0: the frame centre)",
-          0.0, 1e6, DEFAULT_PROP_PRINCIPAL, playing));
+          "Principal point x in pixels, with fx: 0 to 1e6, pixel centres at integers "
+          "(0 is the left pixel column). -1 (the default) is \"not set\": the frame centre; "
+          "values between -1 and 0 are refused",
+          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL,
+          playing));
   g_object_class_install_property (gobject_class, PROP_CY,
       g_param_spec_double ("cy", "Principal point y",
-          "Principal point y in pixels, pixel centres at integers (0: the frame centre)",
-          0.0, 1e6, DEFAULT_PROP_PRINCIPAL, playing));
+          "Principal point y in pixels, with fx: 0 to 1e6, pixel centres at integers "
+          "(0 is the top pixel row). -1 (the default) is \"not set\": the frame centre; "
+          "values between -1 and 0 are refused",
+          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL,
+          playing));
   g_object_class_install_property (gobject_class, PROP_DISTORTION,
       g_param_spec_string ("distortion", "Distortion",
           "Lens distortion with fx: k1,k2,p1,p2[,k3[,k4,k5,k6]] as OpenCV orders "
@@ -603,6 +611,20 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
         return;
       }
       break;
+    case PROP_CX:
+    case PROP_CY:{
+      /* Between -1 ("not set") and 0: neither, so refused as text is. */
+      const std::string refusal = lftag::gst::refuse_principal (GST_ELEMENT (self),
+          pspec->name, g_value_get_double (value));
+      if (!refusal.empty ()) {
+        GST_OBJECT_LOCK (self);
+        (prop_id == PROP_CX ? self->settings->cx_error : self->settings->cy_error) =
+            refusal;
+        GST_OBJECT_UNLOCK (self);
+        return;
+      }
+      break;
+    }
     default:
       break;
   }
@@ -623,16 +645,18 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
       s.calibration_file = g_value_get_string (value) ? g_value_get_string (value) : "";
       break;
     case PROP_FX:
-      s.detector.fx = g_value_get_double (value);
+      s.detector.fx = lftag::gst::focal_from_property (g_value_get_double (value));
       break;
     case PROP_FY:
-      s.detector.fy = g_value_get_double (value);
+      s.detector.fy = lftag::gst::focal_from_property (g_value_get_double (value));
       break;
     case PROP_CX:
-      s.detector.cx = g_value_get_double (value);
+      s.cx_error.clear ();
+      s.detector.cx = lftag::gst::principal_from_property (g_value_get_double (value));
       break;
     case PROP_CY:
-      s.detector.cy = g_value_get_double (value);
+      s.cy_error.clear ();
+      s.detector.cy = lftag::gst::principal_from_property (g_value_get_double (value));
       break;
     case PROP_DISTORTION:
       s.distortion_error.clear ();
@@ -707,16 +731,16 @@ gst_lftag_detect_get_property (GObject * object, guint prop_id, GValue * value,
       g_value_set_string (value, optional_string (s.calibration_file));
       break;
     case PROP_FX:
-      g_value_set_double (value, s.detector.fx);
+      g_value_set_double (value, lftag::gst::focal_to_property (s.detector.fx));
       break;
     case PROP_FY:
-      g_value_set_double (value, s.detector.fy);
+      g_value_set_double (value, lftag::gst::focal_to_property (s.detector.fy));
       break;
     case PROP_CX:
-      g_value_set_double (value, s.detector.cx);
+      g_value_set_double (value, lftag::gst::principal_to_property (s.detector.cx));
       break;
     case PROP_CY:
-      g_value_set_double (value, s.detector.cy);
+      g_value_set_double (value, lftag::gst::principal_to_property (s.detector.cy));
       break;
     case PROP_DISTORTION:
       g_value_set_string (value, optional_string (s.distortion_text));
@@ -790,7 +814,7 @@ gst_lftag_detect_start (GstBaseTransform * trans)
   GST_OBJECT_UNLOCK (self);
   st.messages.reset ();
   if (!lftag::gst::no_refused_values (GST_ELEMENT (self), {&s.families_error,
-              &s.distortion_error}))
+              &s.distortion_error, &s.cx_error, &s.cy_error}))
     return FALSE;
   st.warned_budget = false;
   if (s.calibration_file.empty ())
@@ -862,6 +886,11 @@ gst_lftag_detect_update_detector (GstLFTagDetect * self, const Settings & s,
     st.detector.emplace (detector_params (s.detector, camera));
     st.built = s.detector;
     st.rejected = DetectorSettings ();
+    const std::string ignored = lftag::gst::ignored_pinhole (pinhole (s.detector),
+        st.calibration.has_value ());
+    if (!ignored.empty ())
+      GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS, ("%s.", ignored.c_str ()),
+          (nullptr));
     GST_DEBUG_OBJECT (self, "detector for %s, camera fx %g fy %g cx %g cy %g%s",
         s.families_text.c_str (), camera.fx, camera.fy, camera.cx, camera.cy,
         camera.calibrated ? "" : " (default)");

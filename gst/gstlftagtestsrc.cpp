@@ -16,6 +16,10 @@
  * its size in pixels. The meta has no tags, so it survives videoconvert and videoscale
  * (its coordinates stay in the rendered frame's pixels).
  *
+ * The camera is the calibration file's, else fx, fy, cx and cy, else the default
+ * camera (fx = fy = frame width, centred). "Not set" is a value no camera has: 0
+ * for fx and fy, -1 for cx and cy (0 is the first pixel column or row).
+ *
  * Without caps from downstream it produces 640x480 GRAY8 at 30 frames per second
  * (or the calibration's own frame size); in other formats a frame is exactly what
  * videoconvert makes of the grey one.
@@ -87,8 +91,8 @@ enum
 #define DEFAULT_PROP_NOISE 0.0
 #define DEFAULT_PROP_BACKGROUND GST_LFTAG_TEST_SRC_BACKGROUND_FLAT
 #define DEFAULT_PROP_BACKGROUND_LOCATION nullptr
-#define DEFAULT_PROP_FOCAL 0.0
-#define DEFAULT_PROP_PRINCIPAL 0.0
+#define DEFAULT_PROP_FOCAL lftag::gst::kUnsetFocal
+#define DEFAULT_PROP_PRINCIPAL lftag::gst::kUnsetPrincipal
 #define DEFAULT_PROP_CALIBRATION_FILE nullptr
 #define DEFAULT_PROP_SEED 0
 #define DEFAULT_PROP_IS_LIVE FALSE
@@ -154,8 +158,8 @@ using lftag::TagId;
 struct Settings {
   int family = DEFAULT_PROP_FAMILY;
   std::string ids_text;
-  /* A refused ids value (lftag::gst::refuse_value), until a good value clears it. */
-  std::string ids_error;
+  /* Refused values (lftag::gst::refuse_value), until a good value clears them. */
+  std::string ids_error, cx_error, cy_error;
   std::vector<TagId> ids;
   guint count = DEFAULT_PROP_COUNT;
   double tag_size = DEFAULT_PROP_TAG_SIZE;
@@ -164,8 +168,7 @@ struct Settings {
   double noise = DEFAULT_PROP_NOISE;
   GstLFTagTestSrcBackground background = DEFAULT_PROP_BACKGROUND;
   std::string background_location;
-  double fx = DEFAULT_PROP_FOCAL, fy = DEFAULT_PROP_FOCAL;
-  double cx = DEFAULT_PROP_PRINCIPAL, cy = DEFAULT_PROP_PRINCIPAL;
+  lftag::gst::PinholeSettings pinhole;     /* empty: not set; no distortion */
   std::string calibration_file;
   guint seed = DEFAULT_PROP_SEED;
 };
@@ -335,21 +338,27 @@ gst_lftag_test_src_class_init (GstLFTagTestSrcClass * klass)
           DEFAULT_PROP_BACKGROUND_LOCATION, ready));
   g_object_class_install_property (gobject_class, PROP_FX,
       g_param_spec_double ("fx", "Focal length x",
-          "Horizontal focal length in pixels (0: the default camera, fx = fy = "
-          "frame width, a 53 degree field of view, centred)",
-          0.0, 1e6, DEFAULT_PROP_FOCAL, ready));
+          "Horizontal focal length in pixels. 0 (the default) is \"not set\": the "
+          "default camera, fx = fy = frame width, a 53 degree field of view, centred",
+          0.0, lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, ready));
   g_object_class_install_property (gobject_class, PROP_FY,
       g_param_spec_double ("fy", "Focal length y",
-          "Vertical focal length in pixels (0: equal to fx)",
-          0.0, 1e6, DEFAULT_PROP_FOCAL, ready));
+          "Vertical focal length in pixels, with fx. 0 (the default) is \"not set\": equal to fx",
+          0.0, lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, ready));
   g_object_class_install_property (gobject_class, PROP_CX,
       g_param_spec_double ("cx", "Principal point x",
-          "Principal point x in pixels, pixel centres at integers (0: the frame centre)",
-          0.0, 1e6, DEFAULT_PROP_PRINCIPAL, ready));
+          "Principal point x in pixels, with fx: 0 to 1e6, pixel centres at integers "
+          "(0 is the left pixel column). -1 (the default) is \"not set\": the frame centre; "
+          "values between -1 and 0 are refused",
+          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL,
+          ready));
   g_object_class_install_property (gobject_class, PROP_CY,
       g_param_spec_double ("cy", "Principal point y",
-          "Principal point y in pixels, pixel centres at integers (0: the frame centre)",
-          0.0, 1e6, DEFAULT_PROP_PRINCIPAL, ready));
+          "Principal point y in pixels, with fx: 0 to 1e6, pixel centres at integers "
+          "(0 is the top pixel row). -1 (the default) is \"not set\": the frame centre; "
+          "values between -1 and 0 are refused",
+          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL,
+          ready));
   g_object_class_install_property (gobject_class, PROP_CALIBRATION_FILE,
       g_param_spec_string ("calibration-file", "Calibration file",
           "OpenCV camera calibration (YAML, XML or JSON with camera_matrix and "
@@ -440,6 +449,20 @@ gst_lftag_test_src_set_property (GObject * object, guint prop_id,
         return;
       }
       break;
+    case PROP_CX:
+    case PROP_CY:{
+      /* Between -1 ("not set") and 0: neither, so refused as text is. */
+      const std::string refusal = lftag::gst::refuse_principal (GST_ELEMENT (self),
+          pspec->name, g_value_get_double (value));
+      if (!refusal.empty ()) {
+        GST_OBJECT_LOCK (self);
+        (prop_id == PROP_CX ? self->settings->cx_error : self->settings->cy_error) =
+            refusal;
+        GST_OBJECT_UNLOCK (self);
+        return;
+      }
+      break;
+    }
     default:
       break;
   }
@@ -477,16 +500,18 @@ gst_lftag_test_src_set_property (GObject * object, guint prop_id,
       s.background_location = g_value_get_string (value) ? g_value_get_string (value) : "";
       break;
     case PROP_FX:
-      s.fx = g_value_get_double (value);
+      s.pinhole.fx = lftag::gst::focal_from_property (g_value_get_double (value));
       break;
     case PROP_FY:
-      s.fy = g_value_get_double (value);
+      s.pinhole.fy = lftag::gst::focal_from_property (g_value_get_double (value));
       break;
     case PROP_CX:
-      s.cx = g_value_get_double (value);
+      s.cx_error.clear ();
+      s.pinhole.cx = lftag::gst::principal_from_property (g_value_get_double (value));
       break;
     case PROP_CY:
-      s.cy = g_value_get_double (value);
+      s.cy_error.clear ();
+      s.pinhole.cy = lftag::gst::principal_from_property (g_value_get_double (value));
       break;
     case PROP_CALIBRATION_FILE:
       s.calibration_file = g_value_get_string (value) ? g_value_get_string (value) : "";
@@ -546,16 +571,16 @@ gst_lftag_test_src_get_property (GObject * object, guint prop_id, GValue * value
       g_value_set_string (value, optional_string (s.background_location));
       break;
     case PROP_FX:
-      g_value_set_double (value, s.fx);
+      g_value_set_double (value, lftag::gst::focal_to_property (s.pinhole.fx));
       break;
     case PROP_FY:
-      g_value_set_double (value, s.fy);
+      g_value_set_double (value, lftag::gst::focal_to_property (s.pinhole.fy));
       break;
     case PROP_CX:
-      g_value_set_double (value, s.cx);
+      g_value_set_double (value, lftag::gst::principal_to_property (s.pinhole.cx));
       break;
     case PROP_CY:
-      g_value_set_double (value, s.cy);
+      g_value_set_double (value, lftag::gst::principal_to_property (s.pinhole.cy));
       break;
     case PROP_CALIBRATION_FILE:
       g_value_set_string (value, optional_string (s.calibration_file));
@@ -587,7 +612,8 @@ gst_lftag_test_src_start (GstBaseSrc * bsrc)
   const Settings s = gst_lftag_test_src_settings (self);
   State & st = *self->state;
 
-  if (!lftag::gst::no_refused_values (GST_ELEMENT (self), {&s.ids_error}))
+  if (!lftag::gst::no_refused_values (GST_ELEMENT (self), {&s.ids_error, &s.cx_error,
+              &s.cy_error}))
     return FALSE;
   try {
     resolve_ids (s);
@@ -602,6 +628,10 @@ gst_lftag_test_src_start (GstBaseSrc * bsrc)
       && !lftag::gst::load_calibration (GST_ELEMENT (self), s.calibration_file,
           st.calibration))
     return FALSE;
+  const std::string ignored = lftag::gst::ignored_pinhole (s.pinhole,
+      st.calibration.has_value ());
+  if (!ignored.empty ())
+    GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS, ("%s.", ignored.c_str ()), (nullptr));
 
   st.photo.release ();
   if (s.background == GST_LFTAG_TEST_SRC_BACKGROUND_PHOTO) {
@@ -689,7 +719,7 @@ gst_lftag_test_src_set_caps (GstBaseSrc * bsrc, GstCaps * caps)
   /* One renderer per camera: it keeps the per-pixel rays and the background. */
   try {
     lftag::SceneParams params;
-    params.camera = lftag::gst::frame_camera ({s.fx, s.fy, s.cx, s.cy, {}}, st.calibration,
+    params.camera = lftag::gst::frame_camera (s.pinhole, st.calibration,
         width, height);
     params.noise_sigma = s.noise;
     if (s.background == GST_LFTAG_TEST_SRC_BACKGROUND_GRADIENT) {
