@@ -33,8 +33,9 @@ std::string refuse_principal(GstElement* element, const char* property, double v
 Camera frame_camera(const PinholeSettings& pinhole, const std::optional<Camera>& calibration, int width, int height) {
   if (calibration) return calibration->for_frame(width, height);
   if (pinhole.fx) {
-    Camera camera = Camera::pinhole(*pinhole.fx, pinhole.fy.value_or(*pinhole.fx), pinhole.cx.value_or((width - 1) / 2.0),
-                                    pinhole.cy.value_or((height - 1) / 2.0), width, height);
+    Camera camera =
+        Camera::pinhole(*pinhole.fx, pinhole.fy.value_or(*pinhole.fx), pinhole.cx.value_or((width - 1) / 2.0),
+                        pinhole.cy.value_or((height - 1) / 2.0), width, height);
     camera.distortion = pinhole.distortion;
     return camera;
   }
