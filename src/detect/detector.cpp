@@ -61,7 +61,7 @@ void DetectorParams::validate() const {
   for (double t : max_decode_error)
     if (!(t >= 0) || !std::isfinite(t)) fail("decode error thresholds (tau3) must be finite and not negative");
   if (!(tag_size > 0) || !std::isfinite(tag_size)) fail("the tag size must be positive");
-  if (camera.fx != 0 || camera.fy != 0) camera.validate();
+  if (camera) camera->validate();
 }
 
 double DetectionStats::total_ms() const {
@@ -274,7 +274,7 @@ struct Detector::Impl {
 
   const Camera& camera_for(int w, int h) {
     if (camera_size != cv::Size(w, h)) {
-      camera = params.camera.fx > 0 ? params.camera.for_frame(w, h) : Camera::default_for(w, h);
+      camera = params.camera ? params.camera->for_frame(w, h) : Camera::default_for(w, h);
       camera_size = cv::Size(w, h);
     }
     return camera;

@@ -576,7 +576,11 @@ TEST(Detector, ParametersAreValidated) {
   invalid([](DetectorParams& p) { p.max_decode_error[3] = -1; });
   invalid([](DetectorParams& p) { p.tag_size = 0; });
   invalid([](DetectorParams& p) { p.camera = Camera::pinhole(-5, 5, 1, 1); });
+  // A camera given is a camera: an all-zero one is an error, not "no camera" (which is
+  // an empty optional, the default).
+  invalid([](DetectorParams& p) { p.camera = Camera(); });
   DetectorParams p;
+  EXPECT_FALSE(p.camera.has_value());
   EXPECT_DOUBLE_EQ(p.decode_threshold(Family(3)), 5e-4);
   EXPECT_DOUBLE_EQ(p.decode_threshold(Family(4)), 1e-3);
   p.max_decode_error[4] = 2e-3;

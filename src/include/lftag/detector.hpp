@@ -127,9 +127,10 @@ struct DetectorParams {
   double max_ink_spread = 1.5;
 
   // -- Pose.
-  // Intrinsics and distortion. An empty camera (fx == 0) selects Camera::default_for(frame):
-  // decoding is unaffected; poses are then marked uncalibrated.
-  Camera camera;
+  // Intrinsics and distortion, scaled to the frame by Camera::for_frame. None (the
+  // default) selects Camera::default_for(frame): decoding is unaffected; poses are then
+  // marked uncalibrated. A camera given here must pass Camera::validate().
+  std::optional<Camera> camera;
   double tag_size = 0.1;   // metres, outer edge of the black border
   bool refine_pose = true; // iterative refinement of the final pose on all n^2 centroids
 
