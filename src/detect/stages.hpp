@@ -218,6 +218,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
                                            const Family& family);
 
 // The checks an outline reading must pass to be a detection, each scale-free.
+constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it
 constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContrast = 16, kMinMargin = 0.03, kMinBaselineGap = 0.25;
 bool acceptable(const OutlineReading& reading, const DetectorParams& params);
 
