@@ -205,6 +205,40 @@ CellFit fit_cell(const CellSamples& cell, double sigma) {
   return fit;
 }
 
+// The id read from the data cells under homography h (true turn), and the least margin
+// of its cells (see OutlineReading::margin).
+std::pair<TagId, double> read_cells(const ImageView& image, const cv::Matx33d& h, const Family& family,
+                                    double pixels_per_unit, double contrast) {
+  const int n = family.n();
+  // Each data cell's digit: the square position whose blurred model fits the cell's grey
+  // levels best (least squares, with the cell's own paper and ink levels), at the blur that
+  // fits the whole marker best.
+  std::vector<CellSamples> cells;
+  for (int g = 0; g < family.cell_count(); ++g)
+    if (!family.is_baseline(g)) cells.push_back(sample_cell(image, h, g / n, g % n));
+  std::vector<CellFit> fits, best_fits;
+  double best_rss = std::numeric_limits<double>::infinity();
+  for (const double blur : {0.3, 0.6, 1.0, 1.5, 2.2}) {
+    const double sigma = std::max(blur, 0.4 / std::max(pixels_per_unit, 1e-3));
+    fits.clear();
+    double rss = 0;
+    for (const CellSamples& cell : cells) rss += fits.emplace_back(fit_cell(cell, sigma)).rss;
+    if (rss < best_rss) best_rss = rss, best_fits = fits;
+  }
+  TagId id;
+  double margin = 1e9;
+  int k = 0;
+  for (int g = 0; g < family.cell_count(); ++g) {
+    if (family.is_baseline(g)) continue;
+    const CellFit& fit = best_fits[k++];
+    // How much worse the runner-up fits, per sample, in units of the marker's contrast.
+    const double m = (fit.runner_up_rss - fit.rss) / (kCellSamples * contrast * contrast);
+    margin = std::min(margin, fit.ink > 0.4 * contrast ? m : 0.0);
+    id = id.with_digit(family.data_index(g), fit.digit);
+  }
+  return {id, margin};
+}
+
 }  // namespace
 
 std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binary, const PatchFrame& frame) {
@@ -353,29 +387,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // Each data cell's digit: the square position whose blurred model fits the cell's grey
   // levels best (least squares, with the cell's own paper and ink levels), at the blur that
   // fits the whole marker best.
-  std::vector<CellSamples> cells;
-  for (int g = 0; g < family.cell_count(); ++g)
-    if (!family.is_baseline(g)) cells.push_back(sample_cell(image, h, g / n, g % n));
-  std::vector<CellFit> fits, best_fits;
-  double best_rss = std::numeric_limits<double>::infinity();
-  for (const double blur : {0.3, 0.6, 1.0, 1.5, 2.2}) {
-    const double sigma = std::max(blur, 0.4 / std::max(out.pixels_per_unit, 1e-3));
-    fits.clear();
-    double rss = 0;
-    for (const CellSamples& cell : cells) rss += fits.emplace_back(fit_cell(cell, sigma)).rss;
-    if (rss < best_rss) best_rss = rss, best_fits = fits;
-  }
-  TagId id;
-  double margin = 1e9;
-  int k = 0;
-  for (int g = 0; g < family.cell_count(); ++g) {
-    if (family.is_baseline(g)) continue;
-    const CellFit& fit = best_fits[k++];
-    // How much worse the runner-up fits, per sample, in units of the marker's contrast.
-    const double m = (fit.runner_up_rss - fit.rss) / (kCellSamples * out.contrast * out.contrast);
-    margin = std::min(margin, fit.ink > 0.4 * out.contrast ? m : 0.0);
-    id = id.with_digit(family.data_index(g), fit.digit);
-  }
+  const auto [id, margin] = read_cells(image, h, family, out.pixels_per_unit, out.contrast);
   out.margin = margin;
   out.id = id;
 
@@ -393,7 +405,15 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   }
   cv::Mat(refined).convertTo(cv::Mat(3, 3, CV_64F, w.val), CV_64F);
   const cv::Matx33d final_h = to_frame * w * to_template;
-  if (std::isfinite(final_h(2, 2)) && std::abs(final_h(2, 2)) > 1e-12) out.homography = final_h;
+  if (!std::isfinite(final_h(2, 2)) || std::abs(final_h(2, 2)) < 1e-12) {
+    out.marker_correlation = 0;
+    return out;
+  }
+  out.homography = final_h;
+  // Read again under the final homography: a reading at the edge of resolution can change
+  // its mind, and then it is no reading.
+  const auto [again, margin_again] = read_cells(image, final_h, family, out.pixels_per_unit, out.contrast);
+  out.margin = std::min(out.margin, again == id ? margin_again : 0.0);
   return out;
 }
 
