@@ -53,6 +53,7 @@ std::vector<std::pair<std::string, double>> LftagSystem::counters() const {
           {"collinearity", double(s.collinearity)}, {"residual", double(s.residual)},
           {"unambiguous", double(s.unambiguous)},   {"decoded", double(s.decoded)},
           {"second_looks", double(s.second_looks)}, {"second_look_found", double(s.second_look_found)},
+          {"outline_reads", double(s.outline_reads)}, {"outline_found", double(s.outline_found)},
           {"threshold_ms", s.threshold_ms},     {"regions_ms", s.regions_ms},
           {"candidates_ms", s.candidates_ms},   {"keypoints_ms", s.keypoints_ms},
           {"hypotheses_ms", s.hypotheses_ms},   {"decode_ms", s.decode_ms},

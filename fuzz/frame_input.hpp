@@ -62,7 +62,7 @@ inline void detect_frame(const std::uint8_t* data, std::size_t size) {
     // No frame size: it applies as it is to the crop below (one with a size would be
     // refused for a crop of another aspect ratio, as documented).
     params.camera = Camera::pinhole(width, width, (width - 1) / 2.0, (height - 1) / 2.0);
-    params.camera.distortion = {-0.2, 0.05, 0.001, -0.001};
+    params.camera->distortion = {-0.2, 0.05, 0.001, -0.001};
   }
   Detector detector(params);
   DetectionStats stats;

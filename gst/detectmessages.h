@@ -30,8 +30,8 @@ typedef enum {
   GST_LFTAG_DETECT_MESSAGES_EVERY_FRAME = 3,
 } GstLFTagDetectMessages;
 
-#define GST_TYPE_LFTAG_DETECT_MESSAGES (gst_lftag_detect_messages_get_type ())
-GType gst_lftag_detect_messages_get_type (void);
+#define GST_TYPE_LFTAG_DETECT_MESSAGES (gst_lftag_detect_messages_get_type())
+GType gst_lftag_detect_messages_get_type(void);
 
 G_END_DECLS
 
@@ -45,18 +45,17 @@ class DetectMessages {
    * Every analysed frame must come through here, whatever the mode, so that
    * "on-change" and the "appeared" and "vanished" fields compare with the frame
    * just before. */
-  GstMessage *frame (GstObject * source, GstLFTagDetectMessages mode,
-      const GstSegment & segment, GstBuffer * buffer, int width, int height,
-      const std::vector<Detection> & detections);
+  GstMessage* frame(GstObject* source, GstLFTagDetectMessages mode, const GstSegment& segment, GstBuffer* buffer,
+                    int width, int height, const std::vector<Detection>& detections);
   /* A new stream: nothing was seen before. */
-  void reset () { previous_.clear (); }
+  void reset() { previous_.clear(); }
 
  private:
-  std::vector<std::string> previous_;   /* sorted "3x3:6789" of the frame before */
+  std::vector<std::string> previous_; /* sorted "3x3:6789" of the frame before */
 };
 
 /* "3x3:6789": a marker's family and decimal id, as the messages name it. */
-std::string marker_key (const Family & family, const TagId & id);
+std::string marker_key(const Family& family, const TagId& id);
 
 }  // namespace lftag::gst
 

@@ -18,9 +18,10 @@
  *   whose structure holds the analysed frame's "width" and "height",
  *   "analysed" (FALSE when the frame was passed on without detection: late, see
  *   #GstLFTagDetect:late-frames, or unreadable) and "detections", an array of
- *   "lftag/detection" structures (empty when nothing was found). It has no tags, so videoconvert, videoscale, queue, tee and
- *   encoders keep it; its coordinates stay those of the analysed frame. It
- *   replaces an LFTagMeta the buffer already carried.
+ *   "lftag/detection" structures (empty when nothing was found). It has no
+ *   tags, so videoconvert, videoscale, queue, tee and encoders keep it; its
+ *   coordinates stay those of the analysed frame. It replaces an LFTagMeta the
+ *   buffer already carried.
  * - one GstVideoRegionOfInterestMeta per detection: roi_type "lftag", ids
  *   numbered on from the buffer's other regions, the bounding box of the outer
  *   corners clipped to the frame, and a param structure "lftag" with the fields
@@ -61,7 +62,10 @@
  * #GstLFTagDetect:fx and friends. Without either, markers are still found and
  * decoded, poses assume a default camera (fx = fy = frame width, centred) and
  * are marked "calibrated" FALSE, and the element warns once per stream when a
- * metric pose is wanted (axes drawn, or tag-size set).
+ * metric pose is wanted (axes drawn, or tag-size set). "Not set" is a value no
+ * camera has: 0 for fx and fy, -1 for cx and cy (which take 0 as the first pixel
+ * column or row, not as the centre). fy, cx, cy and distortion count only with
+ * fx, and the element warns when it ignores one that is set.
  *
  * ## Example launch lines
  * |[
@@ -96,17 +100,16 @@
 #include <lftag/draw.hpp>
 
 #include "detectmessages.h"
-#include "elementcamera.h"
 #include "detectmetas.h"
 #include "detectoverlay.h"
+#include "elementcamera.h"
 #include "metaconversion.h"
 #include "propertystate.h"
 
-GST_DEBUG_CATEGORY_STATIC (gst_lftag_detect_debug);
+GST_DEBUG_CATEGORY_STATIC(gst_lftag_detect_debug);
 #define GST_CAT_DEFAULT gst_lftag_detect_debug
 
-enum
-{
+enum {
   PROP_0,
   PROP_FAMILIES,
   PROP_TAG_SIZE,
@@ -133,57 +136,47 @@ enum
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
 #define DEFAULT_PROP_TAG_SIZE 0.1
 #define DEFAULT_PROP_CALIBRATION_FILE nullptr
-#define DEFAULT_PROP_FOCAL 0.0
-#define DEFAULT_PROP_PRINCIPAL 0.0
+#define DEFAULT_PROP_FOCAL lftag::gst::kUnsetFocal
+#define DEFAULT_PROP_PRINCIPAL lftag::gst::kUnsetPrincipal
 #define DEFAULT_PROP_DISTORTION nullptr
 #define DEFAULT_PROP_OVERLAY 0
 #define DEFAULT_PROP_MESSAGES GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS
 #define DEFAULT_PROP_LATE_FRAMES GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE
 /* The detector's own parameters default to the library's (DetectorParams). */
 
-#define DETECT_FORMATS "{ GRAY8, I420, YV12, NV12, NV21, Y42B, Y444, RGB, BGR, " \
-    "RGBx, BGRx, xRGB, xBGR, RGBA, BGRA, ARGB, ABGR, YUY2, UYVY, YVYU, I420_10LE, " \
-    "P010_10LE }"
+#define DETECT_FORMATS                                                            \
+  "{ GRAY8, I420, YV12, NV12, NV21, Y42B, Y444, RGB, BGR, "                       \
+  "RGBx, BGRx, xRGB, xBGR, RGBA, BGRA, ARGB, ABGR, YUY2, UYVY, YVYU, I420_10LE, " \
+  "P010_10LE }"
 
-static GstStaticPadTemplate sink_template = GST_STATIC_PAD_TEMPLATE ("sink",
-    GST_PAD_SINK,
-    GST_PAD_ALWAYS,
-    GST_STATIC_CAPS (GST_VIDEO_CAPS_MAKE (DETECT_FORMATS)));
+static GstStaticPadTemplate sink_template =
+    GST_STATIC_PAD_TEMPLATE("sink", GST_PAD_SINK, GST_PAD_ALWAYS, GST_STATIC_CAPS(GST_VIDEO_CAPS_MAKE(DETECT_FORMATS)));
 
-static GstStaticPadTemplate src_template = GST_STATIC_PAD_TEMPLATE ("src",
-    GST_PAD_SRC,
-    GST_PAD_ALWAYS,
-    GST_STATIC_CAPS (GST_VIDEO_CAPS_MAKE (DETECT_FORMATS)));
+static GstStaticPadTemplate src_template =
+    GST_STATIC_PAD_TEMPLATE("src", GST_PAD_SRC, GST_PAD_ALWAYS, GST_STATIC_CAPS(GST_VIDEO_CAPS_MAKE(DETECT_FORMATS)));
 
-#define GST_TYPE_LFTAG_DETECT_OVERLAY (gst_lftag_detect_overlay_get_type ())
-static GType
-gst_lftag_detect_overlay_get_type (void)
-{
+#define GST_TYPE_LFTAG_DETECT_OVERLAY (gst_lftag_detect_overlay_get_type())
+static GType gst_lftag_detect_overlay_get_type(void) {
   static const GFlagsValue values[] = {
-    {GST_LFTAG_DETECT_OVERLAY_OUTLINE, "The outer border of each marker", "outline"},
-    {GST_LFTAG_DETECT_OVERLAY_ID, "Family and id beside the marker (under it)", "id"},
-    {GST_LFTAG_DETECT_OVERLAY_AXES,
-        "Axes: x red, y green, z blue, one tag size long", "axes"},
-    {0, nullptr, nullptr},
+      {GST_LFTAG_DETECT_OVERLAY_OUTLINE, "The outer border of each marker", "outline"},
+      {GST_LFTAG_DETECT_OVERLAY_ID, "Family and id beside the marker (under it)", "id"},
+      {GST_LFTAG_DETECT_OVERLAY_AXES, "Axes: x red, y green, z blue, one tag size long", "axes"},
+      {0, nullptr, nullptr},
   };
-  static const GType type = g_flags_register_static ("GstLFTagDetectOverlay", values);
+  static const GType type = g_flags_register_static("GstLFTagDetectOverlay", values);
   return type;
 }
 
-#define GST_TYPE_LFTAG_DETECT_LATE_FRAMES (gst_lftag_detect_late_frames_get_type ())
-static GType
-gst_lftag_detect_late_frames_get_type (void)
-{
+#define GST_TYPE_LFTAG_DETECT_LATE_FRAMES (gst_lftag_detect_late_frames_get_type())
+static GType gst_lftag_detect_late_frames_get_type(void) {
   static const GEnumValue values[] = {
-    {GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE, "Analyse every frame, however late", "analyse"},
-    {GST_LFTAG_DETECT_LATE_FRAMES_SKIP,
-        "Pass late frames on unanalysed, their meta saying so", "skip"},
-    {0, nullptr, nullptr},
+      {GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE, "Analyse every frame, however late", "analyse"},
+      {GST_LFTAG_DETECT_LATE_FRAMES_SKIP, "Pass late frames on unanalysed, their meta saying so", "skip"},
+      {0, nullptr, nullptr},
   };
-  static const GType type = g_enum_register_static ("GstLFTagDetectLateFrames", values);
+  static const GType type = g_enum_register_static("GstLFTagDetectLateFrames", values);
   return type;
 }
-
 
 namespace {
 
@@ -195,21 +188,19 @@ using lftag::Family;
 struct DetectorSettings {
   std::vector<Family> families;
   double tag_size = DEFAULT_PROP_TAG_SIZE;
-  double fx = DEFAULT_PROP_FOCAL, fy = DEFAULT_PROP_FOCAL;
-  double cx = DEFAULT_PROP_PRINCIPAL, cy = DEFAULT_PROP_PRINCIPAL;
+  std::optional<double> fx, fy, cx, cy; /* empty: not set */
   std::vector<double> distortion;
   int threshold_window = 0, threshold_offset = 0;
   bool second_look = true;
   double max_ink_ratio = 0, min_spread_ratio = 0, max_decode_error = 0, max_cell_residual = 0;
   int max_candidates = 0;
 
-  auto tie () const {
-    return std::tie (families, tag_size, fx, fy, cx, cy, distortion, threshold_window,
-        threshold_offset, second_look, max_ink_ratio, min_spread_ratio, max_decode_error,
-        max_cell_residual, max_candidates);
+  auto tie() const {
+    return std::tie(families, tag_size, fx, fy, cx, cy, distortion, threshold_window, threshold_offset, second_look,
+                    max_ink_ratio, min_spread_ratio, max_decode_error, max_cell_residual, max_candidates);
   }
-  bool operator== (const DetectorSettings & o) const { return tie () == o.tie (); }
-  bool operator!= (const DetectorSettings & o) const { return !(*this == o); }
+  bool operator==(const DetectorSettings& o) const { return tie() == o.tie(); }
+  bool operator!=(const DetectorSettings& o) const { return !(*this == o); }
 };
 
 /* What the properties say; guarded by the object lock. */
@@ -218,16 +209,16 @@ struct Settings {
   std::string families_text = DEFAULT_PROP_FAMILIES;
   std::string distortion_text;
   std::string calibration_file;
-  bool tag_size_set = false;    /* a metric pose was asked for */
+  bool tag_size_set = false; /* a metric pose was asked for */
   /* Refused values (lftag::gst::refuse_value), until a good value clears them. */
-  std::string families_error, distortion_error;
+  std::string families_error, distortion_error, cx_error, cy_error;
   guint overlay = DEFAULT_PROP_OVERLAY;
   GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
   GstLFTagDetectLateFrames late_frames = DEFAULT_PROP_LATE_FRAMES;
 
-  Settings () {
+  Settings() {
     const lftag::DetectorParams defaults;
-    detector.families = Family::parse_list (DEFAULT_PROP_FAMILIES);
+    detector.families = Family::parse_list(DEFAULT_PROP_FAMILIES);
     detector.threshold_window = defaults.threshold_window;
     detector.threshold_offset = defaults.threshold_offset;
     detector.second_look = defaults.second_look;
@@ -241,19 +232,19 @@ struct Settings {
 /* Per-stream state, used by the streaming thread only (start, stop, caps and
  * buffers are serialised). */
 struct State {
-  std::optional<Camera> calibration;    /* start() */
-  cv::Mat1f luma_weights;               /* set_info(): packed formats, per byte of a pixel */
-  double luma_scale = 0;                /* set_info(): 16-bit luma planes, to 8 bits */
-  cv::Mat1b luma;                       /* packed and 16-bit formats: reused */
+  std::optional<Camera> calibration; /* start() */
+  cv::Mat1f luma_weights;            /* set_info(): packed formats, per byte of a pixel */
+  double luma_scale = 0;             /* set_info(): 16-bit luma planes, to 8 bits */
+  cv::Mat1b luma;                    /* packed and 16-bit formats: reused */
   lftag::gst::DetectOverlay overlay;
-  bool ask_downstream = true;           /* whether it takes overlay compositions */
-  bool attach_composition = false;      /* its answer: attach, else blend */
+  bool ask_downstream = true;      /* whether it takes overlay compositions */
+  bool attach_composition = false; /* its answer: attach, else blend */
   std::optional<lftag::Detector> detector;
-  DetectorSettings built, rejected;     /* the detector's settings; a set that failed */
+  DetectorSettings built, rejected; /* the detector's settings; a set that failed */
   bool warned_uncalibrated = false;
   lftag::gst::DetectMessages messages;
-  guint64 analysed = 0, skipped = 0;    /* frames, for QoS messages */
-  bool warned_budget = false;           /* the first frame the budget cut */
+  guint64 analysed = 0, skipped = 0; /* frames, for QoS messages */
+  bool warned_budget = false;        /* the first frame the budget cut */
 };
 
 /* Downstream's latest QoS report: frames due before `earliest` (running time) are
@@ -265,36 +256,30 @@ struct Lateness {
 
 /* "k1,k2,p1,p2[,k3[,k4,k5,k6]]" as OpenCV orders them, with a decimal point
  * whatever the locale. Throws std::invalid_argument. */
-std::vector<double>
-parse_distortion (const std::string & text)
-{
+std::vector<double> parse_distortion(const std::string& text) {
   std::vector<double> values;
-  std::istringstream in (text);
+  std::istringstream in(text);
   std::string item;
-  while (std::getline (in, item, ',')) {
-    gchar *end = nullptr;
-    const double v = g_ascii_strtod (item.c_str (), &end);
-    if (end == item.c_str () || item.find_first_not_of (" \t", end - item.c_str ()) !=
-        std::string::npos || !std::isfinite (v))
-      throw std::invalid_argument ("'" + item + "' is not a number");
-    values.push_back (v);
+  while (std::getline(in, item, ',')) {
+    gchar* end = nullptr;
+    const double v = g_ascii_strtod(item.c_str(), &end);
+    if (end == item.c_str() || item.find_first_not_of(" \t", end - item.c_str()) != std::string::npos ||
+        !std::isfinite(v))
+      throw std::invalid_argument("'" + item + "' is not a number");
+    values.push_back(v);
   }
-  if (values.size () != 4 && values.size () != 5 && values.size () != 8)
-    throw std::invalid_argument ("it needs 4, 5 or 8 comma-separated coefficients "
-        "(k1,k2,p1,p2[,k3[,k4,k5,k6]]), not " + std::to_string (values.size ()));
+  if (values.size() != 4 && values.size() != 5 && values.size() != 8)
+    throw std::invalid_argument(
+        "it needs 4, 5 or 8 comma-separated coefficients "
+        "(k1,k2,p1,p2[,k3[,k4,k5,k6]]), not " +
+        std::to_string(values.size()));
   return values;
 }
 
 /* The hand-set camera of the settings. */
-static lftag::gst::PinholeSettings
-pinhole (const DetectorSettings & s)
-{
-  return {s.fx, s.fy, s.cx, s.cy, s.distortion};
-}
+static lftag::gst::PinholeSettings pinhole(const DetectorSettings& s) { return {s.fx, s.fy, s.cx, s.cy, s.distortion}; }
 
-lftag::DetectorParams
-detector_params (const DetectorSettings & s, const Camera & camera)
-{
+lftag::DetectorParams detector_params(const DetectorSettings& s, const Camera& camera) {
   lftag::DetectorParams p;
   p.families = s.families;
   p.tag_size = s.tag_size;
@@ -306,27 +291,23 @@ detector_params (const DetectorSettings & s, const Camera & camera)
   p.min_spread_ratio = s.min_spread_ratio;
   p.max_cell_residual = s.max_cell_residual;
   p.max_candidates = s.max_candidates;
-  if (s.max_decode_error > 0)
-    p.max_decode_error.fill (s.max_decode_error);
+  if (s.max_decode_error > 0) p.max_decode_error.fill(s.max_decode_error);
   return p;
 }
 
 /* The luma of a packed format as one weight per byte of a pixel: BT.601 for RGB (0 for
  * x and A), 1 for the Y byte of packed 4:2:2 YUV (a pixel is then two bytes, Y and U or
  * V). Empty for formats whose plane 0 is the luma itself. */
-cv::Mat1f
-luma_weights (const GstVideoFormatInfo * finfo)
-{
-  if (GST_VIDEO_FORMAT_INFO_IS_RGB (finfo)) {
+cv::Mat1f luma_weights(const GstVideoFormatInfo* finfo) {
+  if (GST_VIDEO_FORMAT_INFO_IS_RGB(finfo)) {
     const float rgb[3] = {0.299f, 0.587f, 0.114f};
-    cv::Mat1f weights (1, GST_VIDEO_FORMAT_INFO_PSTRIDE (finfo, 0), 0.0f);
-    for (int c = 0; c < 3; ++c)
-      weights (0, GST_VIDEO_FORMAT_INFO_POFFSET (finfo, c)) = rgb[c];
+    cv::Mat1f weights(1, GST_VIDEO_FORMAT_INFO_PSTRIDE(finfo, 0), 0.0f);
+    for (int c = 0; c < 3; ++c) weights(0, GST_VIDEO_FORMAT_INFO_POFFSET(finfo, c)) = rgb[c];
     return weights;
   }
-  if (GST_VIDEO_FORMAT_INFO_PSTRIDE (finfo, 0) == 2 && GST_VIDEO_FORMAT_INFO_DEPTH (finfo, 0) == 8) {
-    cv::Mat1f weights (1, 2, 0.0f);
-    weights (0, GST_VIDEO_FORMAT_INFO_POFFSET (finfo, 0)) = 1.0f;
+  if (GST_VIDEO_FORMAT_INFO_PSTRIDE(finfo, 0) == 2 && GST_VIDEO_FORMAT_INFO_DEPTH(finfo, 0) == 8) {
+    cv::Mat1f weights(1, 2, 0.0f);
+    weights(0, GST_VIDEO_FORMAT_INFO_POFFSET(finfo, 0)) = 1.0f;
     return weights;
   }
   return {};
@@ -334,237 +315,239 @@ luma_weights (const GstVideoFormatInfo * finfo)
 
 /* The factor from a 16-bit luma plane to 8 bits (10 significant bits, shifted up or
  * not); 0 for 8-bit luma. */
-double
-luma_scale (const GstVideoFormatInfo * finfo)
-{
-  if (GST_VIDEO_FORMAT_INFO_DEPTH (finfo, 0) <= 8)
-    return 0;
-  const int bits = GST_VIDEO_FORMAT_INFO_DEPTH (finfo, 0) + GST_VIDEO_FORMAT_INFO_SHIFT (finfo, 0);
-  return 1.0 / double (1 << (bits - 8));
+double luma_scale(const GstVideoFormatInfo* finfo) {
+  if (GST_VIDEO_FORMAT_INFO_DEPTH(finfo, 0) <= 8) return 0;
+  const int bits = GST_VIDEO_FORMAT_INFO_DEPTH(finfo, 0) + GST_VIDEO_FORMAT_INFO_SHIFT(finfo, 0);
+  return 1.0 / double(1 << (bits - 8));
 }
-
 
 }  // namespace
 
-struct _GstLFTagDetect
-{
+struct _GstLFTagDetect {
   GstVideoFilter parent;
 
-  Settings *settings;
-  State *state;
-  Lateness lateness;            /* under the object lock */
-  gint downstream_changed;      /* atomic: a reconfigure event came from downstream */
+  Settings* settings;
+  State* state;
+  Lateness lateness;       /* under the object lock */
+  gint downstream_changed; /* atomic: a reconfigure event came from downstream */
 };
 
-static void gst_lftag_detect_set_property (GObject * object, guint prop_id,
-    const GValue * value, GParamSpec * pspec);
-static void gst_lftag_detect_get_property (GObject * object, guint prop_id,
-    GValue * value, GParamSpec * pspec);
-static void gst_lftag_detect_finalize (GObject * object);
+static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const GValue* value, GParamSpec* pspec);
+static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue* value, GParamSpec* pspec);
+static void gst_lftag_detect_finalize(GObject* object);
 
-static gboolean gst_lftag_detect_start (GstBaseTransform * trans);
-static gboolean gst_lftag_detect_stop (GstBaseTransform * trans);
-static GstFlowReturn gst_lftag_detect_transform_ip (GstBaseTransform * trans,
-    GstBuffer * buffer);
-static gboolean gst_lftag_detect_src_event (GstBaseTransform * trans, GstEvent * event);
-static gboolean gst_lftag_detect_set_info (GstVideoFilter * filter, GstCaps * incaps,
-    GstVideoInfo * in_info, GstCaps * outcaps, GstVideoInfo * out_info);
+static gboolean gst_lftag_detect_start(GstBaseTransform* trans);
+static gboolean gst_lftag_detect_stop(GstBaseTransform* trans);
+static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstBuffer* buffer);
+static gboolean gst_lftag_detect_src_event(GstBaseTransform* trans, GstEvent* event);
+static gboolean gst_lftag_detect_set_info(GstVideoFilter* filter, GstCaps* incaps, GstVideoInfo* in_info,
+                                          GstCaps* outcaps, GstVideoInfo* out_info);
 
 #define gst_lftag_detect_parent_class parent_class
-G_DEFINE_TYPE (GstLFTagDetect, gst_lftag_detect, GST_TYPE_VIDEO_FILTER);
-GST_ELEMENT_REGISTER_DEFINE (lftagdetect, "lftagdetect", GST_RANK_NONE,
-    GST_TYPE_LFTAG_DETECT);
+G_DEFINE_TYPE(GstLFTagDetect, gst_lftag_detect, GST_TYPE_VIDEO_FILTER);
+GST_ELEMENT_REGISTER_DEFINE(lftagdetect, "lftagdetect", GST_RANK_NONE, GST_TYPE_LFTAG_DETECT);
 
-static void
-gst_lftag_detect_class_init (GstLFTagDetectClass * klass)
-{
-  GObjectClass *gobject_class = G_OBJECT_CLASS (klass);
-  GstElementClass *element_class = GST_ELEMENT_CLASS (klass);
-  GstBaseTransformClass *trans_class = GST_BASE_TRANSFORM_CLASS (klass);
-  GstVideoFilterClass *filter_class = GST_VIDEO_FILTER_CLASS (klass);
-  const auto playing = GParamFlags (G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS |
-      GST_PARAM_MUTABLE_PLAYING);
-  const auto ready = GParamFlags (G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS |
-      GST_PARAM_MUTABLE_READY);
-  const lftag::DetectorParams defaults;
+static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
+  GObjectClass* gobject_class = G_OBJECT_CLASS(klass);
+  GstElementClass* element_class = GST_ELEMENT_CLASS(klass);
+  GstBaseTransformClass* trans_class = GST_BASE_TRANSFORM_CLASS(klass);
+  GstVideoFilterClass* filter_class = GST_VIDEO_FILTER_CLASS(klass);
+  const auto playing = GParamFlags(G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS | GST_PARAM_MUTABLE_PLAYING);
+  const auto ready = GParamFlags(G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS | GST_PARAM_MUTABLE_READY);
+  /* Static: GCC 12 takes the empty optional camera of a local one for uninitialised
+   * (-Wmaybe-uninitialized) when class_init inlines its destructor. */
+  static const lftag::DetectorParams defaults;
 
-  GST_DEBUG_CATEGORY_INIT (gst_lftag_detect_debug, "lftagdetect", 0,
-      "LFTag marker detector");
+  GST_DEBUG_CATEGORY_INIT(gst_lftag_detect_debug, "lftagdetect", 0, "LFTag marker detector");
 
   gobject_class->set_property = gst_lftag_detect_set_property;
   gobject_class->get_property = gst_lftag_detect_get_property;
   gobject_class->finalize = gst_lftag_detect_finalize;
 
-  g_object_class_install_property (gobject_class, PROP_FAMILIES,
-      g_param_spec_string ("families", "Families",
-          "Marker families to detect, comma-separated, from 2x2 to 8x8 (for "
-          "example 3x3,4x4,6x6); every family costs a little time. Unset: the default",
-          DEFAULT_PROP_FAMILIES, playing));
-  g_object_class_install_property (gobject_class, PROP_TAG_SIZE,
-      g_param_spec_double ("tag-size", "Tag size",
-          "Outer edge of the markers' black border in metres: the scale of the "
-          "poses (tvec) and of the drawn axes. Metric only with a calibrated camera",
-          0.001, 100.0, DEFAULT_PROP_TAG_SIZE, playing));
-  g_object_class_install_property (gobject_class, PROP_CALIBRATION_FILE,
-      g_param_spec_string ("calibration-file", "Calibration file",
-          "OpenCV camera calibration (YAML, XML or JSON with camera_matrix and "
-          "distortion_coefficients, as OpenCV's calibration samples write, or "
-          "cameraMatrix and distCoeffs, as cameracalibrate writes). Used instead of "
-          "fx, fy, cx, cy and distortion; scaled to the frame when it records "
-          "image_width and image_height, which must then have the frame's shape",
-          DEFAULT_PROP_CALIBRATION_FILE, ready));
-  g_object_class_install_property (gobject_class, PROP_FX,
-      g_param_spec_double ("fx", "Focal length x",
-          "Horizontal focal length in pixels, for poses. 0: no camera given; poses "
-          "then assume fx = fy = frame width, centred, and are marked uncalibrated",
-          0.0, 1e6, DEFAULT_PROP_FOCAL, playing));
-  g_object_class_install_property (gobject_class, PROP_FY,
-      g_param_spec_double ("fy", "Focal length y",
-          "Vertical focal length in pixels (0: equal to fx)",
-          0.0, 1e6, DEFAULT_PROP_FOCAL, playing));
-  g_object_class_install_property (gobject_class, PROP_CX,
-      g_param_spec_double ("cx", "Principal point x",
-          "Principal point x in pixels, pixel centres at integers (0: the frame centre)",
-          0.0, 1e6, DEFAULT_PROP_PRINCIPAL, playing));
-  g_object_class_install_property (gobject_class, PROP_CY,
-      g_param_spec_double ("cy", "Principal point y",
-          "Principal point y in pixels, pixel centres at integers (0: the frame centre)",
-          0.0, 1e6, DEFAULT_PROP_PRINCIPAL, playing));
-  g_object_class_install_property (gobject_class, PROP_DISTORTION,
-      g_param_spec_string ("distortion", "Distortion",
-          "Lens distortion with fx: k1,k2,p1,p2[,k3[,k4,k5,k6]] as OpenCV orders "
-          "them, comma-separated (unset: none)",
-          DEFAULT_PROP_DISTORTION, playing));
-  g_object_class_install_property (gobject_class, PROP_OVERLAY,
-      g_param_spec_flags ("overlay", "Overlay",
-          "What to draw onto the frames, anti-aliased, scaled to the frame size "
-          "(for example outline+id+axes). Drawing writes to the frame (a copy when "
-          "it is shared); with nothing to draw the pixels are left untouched",
-          GST_TYPE_LFTAG_DETECT_OVERLAY, DEFAULT_PROP_OVERLAY, playing));
-  g_object_class_install_property (gobject_class, PROP_MESSAGES,
-      g_param_spec_enum ("messages", "Messages",
-          "Which frames post an element message \"lftag\" (ids and centres, then "
-          "the full detections): with-markers, on-change (the set of ids changed), "
-          "every-frame or none",
-          GST_TYPE_LFTAG_DETECT_MESSAGES, DEFAULT_PROP_MESSAGES, playing));
-  g_object_class_install_property (gobject_class, PROP_MESSAGE,
-      g_param_spec_boolean ("message", "Message",
-          "Deprecated: use messages. TRUE: messages=with-markers (unless messages "
-          "already posts), FALSE: messages=none; reads TRUE unless messages=none",
-          TRUE, GParamFlags (playing | G_PARAM_DEPRECATED)));
-  g_object_class_install_property (gobject_class, PROP_THRESHOLD_WINDOW,
-      g_param_spec_int ("threshold-window", "Threshold window",
-          "Side in pixels of the window whose mean grey level a pixel must be below "
-          "to count as black (the paper's M). Larger suits large markers",
-          2, 1024, defaults.threshold_window, playing));
-  g_object_class_install_property (gobject_class, PROP_THRESHOLD_OFFSET,
-      g_param_spec_int ("threshold-offset", "Threshold offset",
-          "Grey levels below the window's mean for a pixel to count as black; "
-          "raising it ignores faint texture and noise",
-          0, 255, defaults.threshold_offset, playing));
-  g_object_class_install_property (gobject_class, PROP_SECOND_LOOK,
-      g_param_spec_boolean ("second-look", "Second look",
-          "Look again, enlarged and with a local threshold, at small isolated "
-          "clusters where no marker was found: far, small and motion-blurred markers",
-          defaults.second_look, playing));
-  g_object_class_install_property (gobject_class, PROP_MAX_AREA_RATIO,
-      g_param_spec_double ("max-area-ratio", "Maximum area ratio",
-          "tau1: a candidate is rejected when its largest black square is larger "
-          "than this many times its smallest, once perspective is taken out (the "
-          "design ratio is 1.78)",
-          1.0, 100.0, defaults.max_ink_ratio, playing));
-  g_object_class_install_property (gobject_class, PROP_MIN_SPREAD_RATIO,
-      g_param_spec_double ("min-spread-ratio", "Minimum spread ratio",
-          "tau2: a candidate is rejected when its squares' centres are this close to "
-          "collinear (minor to major axis of their scatter)",
-          0.0, 1.0, defaults.min_spread_ratio, playing));
-  g_object_class_install_property (gobject_class, PROP_MAX_DECODE_ERROR,
-      g_param_spec_double ("max-decode-error", "Maximum decoding error",
-          "tau3: a reading is rejected when its decoding error exceeds this, for "
-          "every family (0: each family's calibrated default; the paper's 5e-4 for "
-          "3x3 and 1e-3 for 4x4)",
-          0.0, 1.0, 0.0, playing));
-  g_object_class_install_property (gobject_class, PROP_MAX_CELL_RESIDUAL,
-      g_param_spec_double ("max-cell-residual", "Maximum cell residual",
-          "A reading is rejected when a square lies further than this from its "
-          "decoded position, in marker units (positions are 1 unit apart)",
-          0.01, 1.0, defaults.max_cell_residual, playing));
-  g_object_class_install_property (gobject_class, PROP_LATE_FRAMES,
-      g_param_spec_enum ("late-frames", "Late frames",
-          "What to do with a frame that a synchronised sink reports late (QoS): "
-          "analyse it anyway, or pass it on unanalysed (its LFTagMeta has "
-          "\"analysed\" FALSE, and a QoS message counts it). No frame is ever dropped",
-          GST_TYPE_LFTAG_DETECT_LATE_FRAMES, DEFAULT_PROP_LATE_FRAMES, playing));
-  g_object_class_install_property (gobject_class, PROP_MAX_CANDIDATES,
-      g_param_spec_int ("max-candidates", "Candidates per frame",
-          "Work budget per frame: at most this many candidate markers (white "
-          "regions holding n x n black squares) are examined, the most plausible "
-          "first; the rest are skipped, so that a frame full of look-alikes (a "
-          "tiled wall, a perforated sheet) cannot stall the stream. The first "
-          "frame cut posts a warning. 0: no limit",
-          0, G_MAXINT, defaults.max_candidates, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_FAMILIES,
+      g_param_spec_string("families", "Families",
+                          "Marker families to detect, comma-separated, from 2x2 to 8x8 (for "
+                          "example 3x3,4x4,6x6); every family costs a little time. Unset: the default",
+                          DEFAULT_PROP_FAMILIES, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_TAG_SIZE,
+      g_param_spec_double("tag-size", "Tag size",
+                          "Outer edge of the markers' black border in metres: the scale of the "
+                          "poses (tvec) and of the drawn axes. Metric only with a calibrated camera",
+                          0.001, 100.0, DEFAULT_PROP_TAG_SIZE, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_CALIBRATION_FILE,
+      g_param_spec_string("calibration-file", "Calibration file",
+                          "OpenCV camera calibration (YAML, XML or JSON with camera_matrix and "
+                          "distortion_coefficients, as OpenCV's calibration samples write, or "
+                          "cameraMatrix and distCoeffs, as cameracalibrate writes). Used instead of "
+                          "fx, fy, cx, cy and distortion; scaled to the frame when it records "
+                          "image_width and image_height, which must then have the frame's shape",
+                          DEFAULT_PROP_CALIBRATION_FILE, ready));
+  g_object_class_install_property(
+      gobject_class, PROP_FX,
+      g_param_spec_double("fx", "Focal length x",
+                          "Horizontal focal length in pixels, for poses. 0 (the default) is \"not set\": "
+                          "poses then assume fx = fy = frame width, centred, and are marked uncalibrated",
+                          0.0, lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_FY,
+      g_param_spec_double("fy", "Focal length y",
+                          "Vertical focal length in pixels, with fx. 0 (the default) is \"not set\": equal to fx", 0.0,
+                          lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_CX,
+      g_param_spec_double("cx", "Principal point x",
+                          "Principal point x in pixels, with fx: 0 to 1e6, pixel centres at integers "
+                          "(0 is the left pixel column). -1 (the default) is \"not set\": the frame centre; "
+                          "values between -1 and 0 are refused",
+                          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_CY,
+      g_param_spec_double("cy", "Principal point y",
+                          "Principal point y in pixels, with fx: 0 to 1e6, pixel centres at integers "
+                          "(0 is the top pixel row). -1 (the default) is \"not set\": the frame centre; "
+                          "values between -1 and 0 are refused",
+                          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_DISTORTION,
+      g_param_spec_string("distortion", "Distortion",
+                          "Lens distortion with fx: k1,k2,p1,p2[,k3[,k4,k5,k6]] as OpenCV orders "
+                          "them, comma-separated (unset: none)",
+                          DEFAULT_PROP_DISTORTION, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_OVERLAY,
+      g_param_spec_flags("overlay", "Overlay",
+                         "What to draw onto the frames, anti-aliased, scaled to the frame size "
+                         "(for example outline+id+axes). Drawing writes to the frame (a copy when "
+                         "it is shared); with nothing to draw the pixels are left untouched",
+                         GST_TYPE_LFTAG_DETECT_OVERLAY, DEFAULT_PROP_OVERLAY, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_MESSAGES,
+      g_param_spec_enum("messages", "Messages",
+                        "Which frames post an element message \"lftag\" (ids and centres, then "
+                        "the full detections): with-markers, on-change (the set of ids changed), "
+                        "every-frame or none",
+                        GST_TYPE_LFTAG_DETECT_MESSAGES, DEFAULT_PROP_MESSAGES, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_MESSAGE,
+      g_param_spec_boolean("message", "Message",
+                           "Deprecated: use messages. TRUE: messages=with-markers (unless messages "
+                           "already posts), FALSE: messages=none; reads TRUE unless messages=none",
+                           TRUE, GParamFlags(playing | G_PARAM_DEPRECATED)));
+  g_object_class_install_property(
+      gobject_class, PROP_THRESHOLD_WINDOW,
+      g_param_spec_int("threshold-window", "Threshold window",
+                       "Side in pixels of the window whose mean grey level a pixel must be below "
+                       "to count as black (the paper's M). Larger suits large markers",
+                       2, 1024, defaults.threshold_window, playing));
+  g_object_class_install_property(gobject_class, PROP_THRESHOLD_OFFSET,
+                                  g_param_spec_int("threshold-offset", "Threshold offset",
+                                                   "Grey levels below the window's mean for a pixel to count as black; "
+                                                   "raising it ignores faint texture and noise",
+                                                   0, 255, defaults.threshold_offset, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_SECOND_LOOK,
+      g_param_spec_boolean("second-look", "Second look",
+                           "Look again, enlarged and with a local threshold, at small isolated "
+                           "clusters where no marker was found: far, small and motion-blurred markers",
+                           defaults.second_look, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_MAX_AREA_RATIO,
+      g_param_spec_double("max-area-ratio", "Maximum area ratio",
+                          "tau1: a candidate is rejected when its largest black square is larger "
+                          "than this many times its smallest, once perspective is taken out (the "
+                          "design ratio is 1.78)",
+                          1.0, 100.0, defaults.max_ink_ratio, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_MIN_SPREAD_RATIO,
+      g_param_spec_double("min-spread-ratio", "Minimum spread ratio",
+                          "tau2: a candidate is rejected when its squares' centres are this close to "
+                          "collinear (minor to major axis of their scatter)",
+                          0.0, 1.0, defaults.min_spread_ratio, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_MAX_DECODE_ERROR,
+      g_param_spec_double("max-decode-error", "Maximum decoding error",
+                          "tau3: a reading is rejected when its decoding error exceeds this, for "
+                          "every family (0: each family's calibrated default; the paper's 5e-4 for "
+                          "3x3 and 1e-3 for 4x4)",
+                          0.0, 1.0, 0.0, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_MAX_CELL_RESIDUAL,
+      g_param_spec_double("max-cell-residual", "Maximum cell residual",
+                          "A reading is rejected when a square lies further than this from its "
+                          "decoded position, in marker units (positions are 1 unit apart)",
+                          0.01, 1.0, defaults.max_cell_residual, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_LATE_FRAMES,
+      g_param_spec_enum("late-frames", "Late frames",
+                        "What to do with a frame that a synchronised sink reports late (QoS): "
+                        "analyse it anyway, or pass it on unanalysed (its LFTagMeta has "
+                        "\"analysed\" FALSE, and a QoS message counts it). No frame is ever dropped",
+                        GST_TYPE_LFTAG_DETECT_LATE_FRAMES, DEFAULT_PROP_LATE_FRAMES, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_MAX_CANDIDATES,
+      g_param_spec_int("max-candidates", "Candidates per frame",
+                       "Work budget per frame: at most this many candidate markers (white "
+                       "regions holding n x n black squares) are examined, the most plausible "
+                       "first; the rest are skipped, so that a frame full of look-alikes (a "
+                       "tiled wall, a perforated sheet) cannot stall the stream. The first "
+                       "frame cut posts a warning. 0: no limit",
+                       0, G_MAXINT, defaults.max_candidates, playing));
 
-  gst_element_class_set_static_metadata (element_class,
-      "LFTag detector", "Filter/Analyzer/Video",
-      "Finds LFTag fiducial markers, decodes their ids and estimates their poses. "
-      "Every frame gets an LFTagMeta (each marker's family, id, key points, corners, "
-      "centroids and pose) and a region-of-interest meta per marker; frames with "
-      "markers post an \"lftag\" element message with the same detections; an "
-      "optional overlay draws outlines, ids and axes",
-      LFTAG_AUTHOR);
-  gst_element_class_add_static_pad_template (element_class, &sink_template);
-  gst_element_class_add_static_pad_template (element_class, &src_template);
+  gst_element_class_set_static_metadata(element_class, "LFTag detector", "Filter/Analyzer/Video",
+                                        "Finds LFTag fiducial markers, decodes their ids and estimates their poses. "
+                                        "Every frame gets an LFTagMeta (each marker's family, id, key points, corners, "
+                                        "centroids and pose) and a region-of-interest meta per marker; frames with "
+                                        "markers post an \"lftag\" element message with the same detections; an "
+                                        "optional overlay draws outlines, ids and axes",
+                                        LFTAG_AUTHOR);
+  gst_element_class_add_static_pad_template(element_class, &sink_template);
+  gst_element_class_add_static_pad_template(element_class, &src_template);
 
-  trans_class->start = GST_DEBUG_FUNCPTR (gst_lftag_detect_start);
-  trans_class->stop = GST_DEBUG_FUNCPTR (gst_lftag_detect_stop);
+  trans_class->start = GST_DEBUG_FUNCPTR(gst_lftag_detect_start);
+  trans_class->stop = GST_DEBUG_FUNCPTR(gst_lftag_detect_stop);
   /* Our own in-place transform: GstVideoFilter's maps every frame writable. */
-  trans_class->transform_ip = GST_DEBUG_FUNCPTR (gst_lftag_detect_transform_ip);
-  trans_class->src_event = GST_DEBUG_FUNCPTR (gst_lftag_detect_src_event);
-  filter_class->set_info = GST_DEBUG_FUNCPTR (gst_lftag_detect_set_info);
+  trans_class->transform_ip = GST_DEBUG_FUNCPTR(gst_lftag_detect_transform_ip);
+  trans_class->src_event = GST_DEBUG_FUNCPTR(gst_lftag_detect_src_event);
+  filter_class->set_info = GST_DEBUG_FUNCPTR(gst_lftag_detect_set_info);
 
-  gst_type_mark_as_plugin_api (GST_TYPE_LFTAG_DETECT_OVERLAY, GstPluginAPIFlags (0));
-  gst_type_mark_as_plugin_api (GST_TYPE_LFTAG_DETECT_LATE_FRAMES, GstPluginAPIFlags (0));
-  gst_type_mark_as_plugin_api (GST_TYPE_LFTAG_DETECT_MESSAGES, GstPluginAPIFlags (0));
+  gst_type_mark_as_plugin_api(GST_TYPE_LFTAG_DETECT_OVERLAY, GstPluginAPIFlags(0));
+  gst_type_mark_as_plugin_api(GST_TYPE_LFTAG_DETECT_LATE_FRAMES, GstPluginAPIFlags(0));
+  gst_type_mark_as_plugin_api(GST_TYPE_LFTAG_DETECT_MESSAGES, GstPluginAPIFlags(0));
 
   /* So that applications find the meta by name as soon as the element exists. */
-  lftag::gst::detection_meta_info ();
+  lftag::gst::detection_meta_info();
 }
 
-static void
-gst_lftag_detect_init (GstLFTagDetect * self)
-{
-  self->settings = new Settings ();
-  self->state = new State ();
+static void gst_lftag_detect_init(GstLFTagDetect* self) {
+  self->settings = new Settings();
+  self->state = new State();
   /* Never passthrough (metadata is added to every buffer), always in place. */
-  gst_base_transform_set_passthrough (GST_BASE_TRANSFORM (self), FALSE);
-  gst_base_transform_set_in_place (GST_BASE_TRANSFORM (self), TRUE);
+  gst_base_transform_set_passthrough(GST_BASE_TRANSFORM(self), FALSE);
+  gst_base_transform_set_in_place(GST_BASE_TRANSFORM(self), TRUE);
   /* GstVideoFilter drops frames that QoS reports late: an analyser must not lose
    * them from its results. Late frames are handled by the late-frames property. */
-  gst_base_transform_set_qos_enabled (GST_BASE_TRANSFORM (self), FALSE);
+  gst_base_transform_set_qos_enabled(GST_BASE_TRANSFORM(self), FALSE);
   self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
 }
 
-static void
-gst_lftag_detect_finalize (GObject * object)
-{
-  GstLFTagDetect *self = GST_LFTAG_DETECT (object);
+static void gst_lftag_detect_finalize(GObject* object) {
+  GstLFTagDetect* self = GST_LFTAG_DETECT(object);
 
   delete self->settings;
   delete self->state;
 
-  G_OBJECT_CLASS (parent_class)->finalize (object);
+  G_OBJECT_CLASS(parent_class)->finalize(object);
 }
 
-static void
-gst_lftag_detect_set_property (GObject * object, guint prop_id,
-    const GValue * value, GParamSpec * pspec)
-{
-  GstLFTagDetect *self = GST_LFTAG_DETECT (object);
-  if (!lftag::gst::property_settable_now (GST_ELEMENT (self), pspec))
-    return;
+static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const GValue* value, GParamSpec* pspec) {
+  GstLFTagDetect* self = GST_LFTAG_DETECT(object);
+  if (!lftag::gst::property_settable_now(GST_ELEMENT(self), pspec)) return;
   std::vector<Family> families;
   std::vector<double> distortion;
-  const gchar *text = nullptr;
+  const gchar* text = nullptr;
   std::string families_text;
 
   /* Text is parsed outside the lock; bad text is refused and changes nothing. */
@@ -573,537 +556,429 @@ gst_lftag_detect_set_property (GObject * object, guint prop_id,
       /* "3x3, 4X4" is read as 3x3,4x4. A value that names no family is refused
        * on the bus (a warning now, while playing; an error when the element
        * starts, for a value set before it had a bus) and the families stay. */
-      text = g_value_get_string (value);
+      text = g_value_get_string(value);
       try {
-        families = Family::parse_list (text ? text : DEFAULT_PROP_FAMILIES);
-        for (const Family & f : families)
-          families_text += (families_text.empty () ? "" : ",") + f.name ();
-      } catch (const std::exception & e) {
-        const std::string refusal = lftag::gst::refuse_value (GST_ELEMENT (self),
-            "families", text, e.what ());
-        GST_OBJECT_LOCK (self);
+        families = Family::parse_list(text ? text : DEFAULT_PROP_FAMILIES);
+        for (const Family& f : families) families_text += (families_text.empty() ? "" : ",") + f.name();
+      } catch (const std::exception& e) {
+        const std::string refusal = lftag::gst::refuse_value(GST_ELEMENT(self), "families", text, e.what());
+        GST_OBJECT_LOCK(self);
         self->settings->families_error = refusal;
-        GST_OBJECT_UNLOCK (self);
+        GST_OBJECT_UNLOCK(self);
         return;
       }
       break;
     case PROP_DISTORTION:
-      text = g_value_get_string (value);
+      text = g_value_get_string(value);
       try {
-        if (text && *text)
-          distortion = parse_distortion (text);
-      } catch (const std::exception & e) {
-        const std::string refusal = lftag::gst::refuse_value (GST_ELEMENT (self),
-            "distortion", text, e.what ());
-        GST_OBJECT_LOCK (self);
+        if (text && *text) distortion = parse_distortion(text);
+      } catch (const std::exception& e) {
+        const std::string refusal = lftag::gst::refuse_value(GST_ELEMENT(self), "distortion", text, e.what());
+        GST_OBJECT_LOCK(self);
         self->settings->distortion_error = refusal;
-        GST_OBJECT_UNLOCK (self);
+        GST_OBJECT_UNLOCK(self);
         return;
       }
       break;
-    default:
+    case PROP_CX:
+    case PROP_CY: {
+      /* Between -1 ("not set") and 0: neither, so refused as text is. */
+      const std::string refusal =
+          lftag::gst::refuse_principal(GST_ELEMENT(self), pspec->name, g_value_get_double(value));
+      if (!refusal.empty()) {
+        GST_OBJECT_LOCK(self);
+        (prop_id == PROP_CX ? self->settings->cx_error : self->settings->cy_error) = refusal;
+        GST_OBJECT_UNLOCK(self);
+        return;
+      }
       break;
+    }
+    default: break;
   }
 
-  GST_OBJECT_LOCK (self);
-  Settings & s = *self->settings;
+  GST_OBJECT_LOCK(self);
+  Settings& s = *self->settings;
   switch (prop_id) {
     case PROP_FAMILIES:
       s.families_text = families_text;
-      s.families_error.clear ();
-      s.detector.families = std::move (families);
+      s.families_error.clear();
+      s.detector.families = std::move(families);
       break;
     case PROP_TAG_SIZE:
-      s.detector.tag_size = g_value_get_double (value);
+      s.detector.tag_size = g_value_get_double(value);
       s.tag_size_set = true;
       break;
-    case PROP_CALIBRATION_FILE:
-      s.calibration_file = g_value_get_string (value) ? g_value_get_string (value) : "";
-      break;
-    case PROP_FX:
-      s.detector.fx = g_value_get_double (value);
-      break;
-    case PROP_FY:
-      s.detector.fy = g_value_get_double (value);
-      break;
+    case PROP_CALIBRATION_FILE: s.calibration_file = g_value_get_string(value) ? g_value_get_string(value) : ""; break;
+    case PROP_FX: s.detector.fx = lftag::gst::focal_from_property(g_value_get_double(value)); break;
+    case PROP_FY: s.detector.fy = lftag::gst::focal_from_property(g_value_get_double(value)); break;
     case PROP_CX:
-      s.detector.cx = g_value_get_double (value);
+      s.cx_error.clear();
+      s.detector.cx = lftag::gst::principal_from_property(g_value_get_double(value));
       break;
     case PROP_CY:
-      s.detector.cy = g_value_get_double (value);
+      s.cy_error.clear();
+      s.detector.cy = lftag::gst::principal_from_property(g_value_get_double(value));
       break;
     case PROP_DISTORTION:
-      s.distortion_error.clear ();
-      s.distortion_text = distortion.empty () ? "" : text;
-      s.detector.distortion = std::move (distortion);
+      s.distortion_error.clear();
+      s.distortion_text = distortion.empty() ? "" : text;
+      s.detector.distortion = std::move(distortion);
       break;
-    case PROP_OVERLAY:
-      s.overlay = g_value_get_flags (value);
-      break;
+    case PROP_OVERLAY: s.overlay = g_value_get_flags(value); break;
     case PROP_MESSAGE:
-      if (!g_value_get_boolean (value))
+      if (!g_value_get_boolean(value))
         s.messages = GST_LFTAG_DETECT_MESSAGES_NONE;
       else if (s.messages == GST_LFTAG_DETECT_MESSAGES_NONE)
         s.messages = GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS;
       break;
-    case PROP_MESSAGES:
-      s.messages = GstLFTagDetectMessages (g_value_get_enum (value));
-      break;
-    case PROP_LATE_FRAMES:
-      s.late_frames = GstLFTagDetectLateFrames (g_value_get_enum (value));
-      break;
-    case PROP_THRESHOLD_WINDOW:
-      s.detector.threshold_window = g_value_get_int (value);
-      break;
-    case PROP_THRESHOLD_OFFSET:
-      s.detector.threshold_offset = g_value_get_int (value);
-      break;
-    case PROP_SECOND_LOOK:
-      s.detector.second_look = g_value_get_boolean (value);
-      break;
-    case PROP_MAX_AREA_RATIO:
-      s.detector.max_ink_ratio = g_value_get_double (value);
-      break;
-    case PROP_MIN_SPREAD_RATIO:
-      s.detector.min_spread_ratio = g_value_get_double (value);
-      break;
-    case PROP_MAX_DECODE_ERROR:
-      s.detector.max_decode_error = g_value_get_double (value);
-      break;
-    case PROP_MAX_CELL_RESIDUAL:
-      s.detector.max_cell_residual = g_value_get_double (value);
-      break;
-    case PROP_MAX_CANDIDATES:
-      s.detector.max_candidates = g_value_get_int (value);
-      break;
-    default:
-      G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
-      break;
+    case PROP_MESSAGES: s.messages = GstLFTagDetectMessages(g_value_get_enum(value)); break;
+    case PROP_LATE_FRAMES: s.late_frames = GstLFTagDetectLateFrames(g_value_get_enum(value)); break;
+    case PROP_THRESHOLD_WINDOW: s.detector.threshold_window = g_value_get_int(value); break;
+    case PROP_THRESHOLD_OFFSET: s.detector.threshold_offset = g_value_get_int(value); break;
+    case PROP_SECOND_LOOK: s.detector.second_look = g_value_get_boolean(value); break;
+    case PROP_MAX_AREA_RATIO: s.detector.max_ink_ratio = g_value_get_double(value); break;
+    case PROP_MIN_SPREAD_RATIO: s.detector.min_spread_ratio = g_value_get_double(value); break;
+    case PROP_MAX_DECODE_ERROR: s.detector.max_decode_error = g_value_get_double(value); break;
+    case PROP_MAX_CELL_RESIDUAL: s.detector.max_cell_residual = g_value_get_double(value); break;
+    case PROP_MAX_CANDIDATES: s.detector.max_candidates = g_value_get_int(value); break;
+    default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
-  GST_OBJECT_UNLOCK (self);
+  GST_OBJECT_UNLOCK(self);
 }
 
-static void
-gst_lftag_detect_get_property (GObject * object, guint prop_id, GValue * value,
-    GParamSpec * pspec)
-{
-  GstLFTagDetect *self = GST_LFTAG_DETECT (object);
-  auto optional_string = [](const std::string & text) {
-    return text.empty ()? nullptr : text.c_str ();
-  };
+static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue* value, GParamSpec* pspec) {
+  GstLFTagDetect* self = GST_LFTAG_DETECT(object);
+  auto optional_string = [](const std::string& text) { return text.empty() ? nullptr : text.c_str(); };
 
-  GST_OBJECT_LOCK (self);
-  const Settings & s = *self->settings;
+  GST_OBJECT_LOCK(self);
+  const Settings& s = *self->settings;
   switch (prop_id) {
-    case PROP_FAMILIES:
-      g_value_set_string (value, s.families_text.c_str ());
-      break;
-    case PROP_TAG_SIZE:
-      g_value_set_double (value, s.detector.tag_size);
-      break;
-    case PROP_CALIBRATION_FILE:
-      g_value_set_string (value, optional_string (s.calibration_file));
-      break;
-    case PROP_FX:
-      g_value_set_double (value, s.detector.fx);
-      break;
-    case PROP_FY:
-      g_value_set_double (value, s.detector.fy);
-      break;
-    case PROP_CX:
-      g_value_set_double (value, s.detector.cx);
-      break;
-    case PROP_CY:
-      g_value_set_double (value, s.detector.cy);
-      break;
-    case PROP_DISTORTION:
-      g_value_set_string (value, optional_string (s.distortion_text));
-      break;
-    case PROP_OVERLAY:
-      g_value_set_flags (value, s.overlay);
-      break;
-    case PROP_MESSAGE:
-      g_value_set_boolean (value, s.messages != GST_LFTAG_DETECT_MESSAGES_NONE);
-      break;
-    case PROP_MESSAGES:
-      g_value_set_enum (value, s.messages);
-      break;
-    case PROP_LATE_FRAMES:
-      g_value_set_enum (value, s.late_frames);
-      break;
-    case PROP_THRESHOLD_WINDOW:
-      g_value_set_int (value, s.detector.threshold_window);
-      break;
-    case PROP_THRESHOLD_OFFSET:
-      g_value_set_int (value, s.detector.threshold_offset);
-      break;
-    case PROP_SECOND_LOOK:
-      g_value_set_boolean (value, s.detector.second_look);
-      break;
-    case PROP_MAX_AREA_RATIO:
-      g_value_set_double (value, s.detector.max_ink_ratio);
-      break;
-    case PROP_MIN_SPREAD_RATIO:
-      g_value_set_double (value, s.detector.min_spread_ratio);
-      break;
-    case PROP_MAX_DECODE_ERROR:
-      g_value_set_double (value, s.detector.max_decode_error);
-      break;
-    case PROP_MAX_CELL_RESIDUAL:
-      g_value_set_double (value, s.detector.max_cell_residual);
-      break;
-    case PROP_MAX_CANDIDATES:
-      g_value_set_int (value, s.detector.max_candidates);
-      break;
-    default:
-      G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
-      break;
+    case PROP_FAMILIES: g_value_set_string(value, s.families_text.c_str()); break;
+    case PROP_TAG_SIZE: g_value_set_double(value, s.detector.tag_size); break;
+    case PROP_CALIBRATION_FILE: g_value_set_string(value, optional_string(s.calibration_file)); break;
+    case PROP_FX: g_value_set_double(value, lftag::gst::focal_to_property(s.detector.fx)); break;
+    case PROP_FY: g_value_set_double(value, lftag::gst::focal_to_property(s.detector.fy)); break;
+    case PROP_CX: g_value_set_double(value, lftag::gst::principal_to_property(s.detector.cx)); break;
+    case PROP_CY: g_value_set_double(value, lftag::gst::principal_to_property(s.detector.cy)); break;
+    case PROP_DISTORTION: g_value_set_string(value, optional_string(s.distortion_text)); break;
+    case PROP_OVERLAY: g_value_set_flags(value, s.overlay); break;
+    case PROP_MESSAGE: g_value_set_boolean(value, s.messages != GST_LFTAG_DETECT_MESSAGES_NONE); break;
+    case PROP_MESSAGES: g_value_set_enum(value, s.messages); break;
+    case PROP_LATE_FRAMES: g_value_set_enum(value, s.late_frames); break;
+    case PROP_THRESHOLD_WINDOW: g_value_set_int(value, s.detector.threshold_window); break;
+    case PROP_THRESHOLD_OFFSET: g_value_set_int(value, s.detector.threshold_offset); break;
+    case PROP_SECOND_LOOK: g_value_set_boolean(value, s.detector.second_look); break;
+    case PROP_MAX_AREA_RATIO: g_value_set_double(value, s.detector.max_ink_ratio); break;
+    case PROP_MIN_SPREAD_RATIO: g_value_set_double(value, s.detector.min_spread_ratio); break;
+    case PROP_MAX_DECODE_ERROR: g_value_set_double(value, s.detector.max_decode_error); break;
+    case PROP_MAX_CELL_RESIDUAL: g_value_set_double(value, s.detector.max_cell_residual); break;
+    case PROP_MAX_CANDIDATES: g_value_set_int(value, s.detector.max_candidates); break;
+    default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
-  GST_OBJECT_UNLOCK (self);
+  GST_OBJECT_UNLOCK(self);
 }
 
-static Settings
-gst_lftag_detect_settings (GstLFTagDetect * self)
-{
-  GST_OBJECT_LOCK (self);
+static Settings gst_lftag_detect_settings(GstLFTagDetect* self) {
+  GST_OBJECT_LOCK(self);
   Settings s = *self->settings;
-  GST_OBJECT_UNLOCK (self);
+  GST_OBJECT_UNLOCK(self);
   return s;
 }
 
 /* Loads the calibration, so that a bad file fails the state change. */
-static gboolean
-gst_lftag_detect_start (GstBaseTransform * trans)
-{
-  GstLFTagDetect *self = GST_LFTAG_DETECT (trans);
-  const Settings s = gst_lftag_detect_settings (self);
-  State & st = *self->state;
+static gboolean gst_lftag_detect_start(GstBaseTransform* trans) {
+  GstLFTagDetect* self = GST_LFTAG_DETECT(trans);
+  const Settings s = gst_lftag_detect_settings(self);
+  State& st = *self->state;
 
-  st.calibration.reset ();
-  st.detector.reset ();
+  st.calibration.reset();
+  st.detector.reset();
   st.warned_uncalibrated = false;
   st.analysed = st.skipped = 0;
-  GST_OBJECT_LOCK (self);
+  GST_OBJECT_LOCK(self);
   self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
-  GST_OBJECT_UNLOCK (self);
-  st.messages.reset ();
-  if (!lftag::gst::no_refused_values (GST_ELEMENT (self), {&s.families_error,
-              &s.distortion_error}))
+  GST_OBJECT_UNLOCK(self);
+  st.messages.reset();
+  if (!lftag::gst::no_refused_values(GST_ELEMENT(self),
+                                     {&s.families_error, &s.distortion_error, &s.cx_error, &s.cy_error}))
     return FALSE;
   st.warned_budget = false;
-  if (s.calibration_file.empty ())
-    return TRUE;
+  if (s.calibration_file.empty()) return TRUE;
 
-  if (!lftag::gst::load_calibration (GST_ELEMENT (self), s.calibration_file, st.calibration))
-    return FALSE;
-  const gchar *path = s.calibration_file.c_str ();
-  GST_INFO_OBJECT (self, "calibration from %s: fx %g fy %g cx %g cy %g, %dx%d", path,
-      st.calibration->fx, st.calibration->fy, st.calibration->cx, st.calibration->cy,
-      st.calibration->width, st.calibration->height);
+  if (!lftag::gst::load_calibration(GST_ELEMENT(self), s.calibration_file, st.calibration)) return FALSE;
+  const gchar* path = s.calibration_file.c_str();
+  GST_INFO_OBJECT(self, "calibration from %s: fx %g fy %g cx %g cy %g, %dx%d", path, st.calibration->fx,
+                  st.calibration->fy, st.calibration->cx, st.calibration->cy, st.calibration->width,
+                  st.calibration->height);
   return TRUE;
 }
 
-static gboolean
-gst_lftag_detect_stop (GstBaseTransform * trans)
-{
-  State & st = *GST_LFTAG_DETECT (trans)->state;
+static gboolean gst_lftag_detect_stop(GstBaseTransform* trans) {
+  State& st = *GST_LFTAG_DETECT(trans)->state;
 
-  st.calibration.reset ();
-  st.detector.reset ();
-  st.luma.release ();
-  st.overlay.reset ();
+  st.calibration.reset();
+  st.detector.reset();
+  st.luma.release();
+  st.overlay.reset();
   st.ask_downstream = true;
   return TRUE;
 }
 
-static gboolean
-gst_lftag_detect_set_info (GstVideoFilter * filter, GstCaps *, GstVideoInfo * in_info,
-    GstCaps *, GstVideoInfo *)
-{
-  GstLFTagDetect *self = GST_LFTAG_DETECT (filter);
-  const Settings s = gst_lftag_detect_settings (self);
-  State & st = *self->state;
-  const int width = GST_VIDEO_INFO_WIDTH (in_info), height = GST_VIDEO_INFO_HEIGHT (in_info);
+static gboolean gst_lftag_detect_set_info(GstVideoFilter* filter, GstCaps*, GstVideoInfo* in_info, GstCaps*,
+                                          GstVideoInfo*) {
+  GstLFTagDetect* self = GST_LFTAG_DETECT(filter);
+  const Settings s = gst_lftag_detect_settings(self);
+  State& st = *self->state;
+  const int width = GST_VIDEO_INFO_WIDTH(in_info), height = GST_VIDEO_INFO_HEIGHT(in_info);
 
   /* A calibration for another shape of frame fails here, not frame after frame. */
   try {
-    lftag::gst::frame_camera (pinhole (s.detector), st.calibration, width, height);
-  } catch (const std::exception & e) {
-    GST_ELEMENT_ERROR (self, CORE, NEGOTIATION,
-        ("Calibration file \"%s\" does not fit %dx%d video: %s.",
-            s.calibration_file.c_str (), width, height, e.what ()), (nullptr));
+    lftag::gst::frame_camera(pinhole(s.detector), st.calibration, width, height);
+  } catch (const std::exception& e) {
+    GST_ELEMENT_ERROR(
+        self, CORE, NEGOTIATION,
+        ("Calibration file \"%s\" does not fit %dx%d video: %s.", s.calibration_file.c_str(), width, height, e.what()),
+        (nullptr));
     return FALSE;
   }
 
-  st.detector.reset ();         /* its camera is the frame's */
-  st.luma_weights = luma_weights (in_info->finfo);
-  st.luma_scale = luma_scale (in_info->finfo);
-  st.luma.release ();
-  st.overlay.reset ();
+  st.detector.reset(); /* its camera is the frame's */
+  st.luma_weights = luma_weights(in_info->finfo);
+  st.luma_scale = luma_scale(in_info->finfo);
+  st.luma.release();
+  st.overlay.reset();
   st.ask_downstream = true;
   return TRUE;
 }
 
 /* (Re)builds the detector when its settings changed. A change that cannot be
  * honoured is reported once and the detector stays as it was. */
-static gboolean
-gst_lftag_detect_update_detector (GstLFTagDetect * self, const Settings & s,
-    const GstVideoInfo * info)
-{
-  State & st = *self->state;
+static gboolean gst_lftag_detect_update_detector(GstLFTagDetect* self, const Settings& s, const GstVideoInfo* info) {
+  State& st = *self->state;
 
-  if (st.detector && (st.built == s.detector || st.rejected == s.detector))
-    return TRUE;
+  if (st.detector && (st.built == s.detector || st.rejected == s.detector)) return TRUE;
   try {
-    const Camera camera = lftag::gst::frame_camera (pinhole (s.detector), st.calibration,
-        GST_VIDEO_INFO_WIDTH (info), GST_VIDEO_INFO_HEIGHT (info));
-    st.detector.emplace (detector_params (s.detector, camera));
+    const Camera camera = lftag::gst::frame_camera(pinhole(s.detector), st.calibration, GST_VIDEO_INFO_WIDTH(info),
+                                                   GST_VIDEO_INFO_HEIGHT(info));
+    st.detector.emplace(detector_params(s.detector, camera));
     st.built = s.detector;
-    st.rejected = DetectorSettings ();
-    GST_DEBUG_OBJECT (self, "detector for %s, camera fx %g fy %g cx %g cy %g%s",
-        s.families_text.c_str (), camera.fx, camera.fy, camera.cx, camera.cy,
-        camera.calibrated ? "" : " (default)");
-  } catch (const std::exception & e) {
+    st.rejected = DetectorSettings();
+    const std::string ignored = lftag::gst::ignored_pinhole(pinhole(s.detector), st.calibration.has_value());
+    if (!ignored.empty()) GST_ELEMENT_WARNING(self, RESOURCE, SETTINGS, ("%s.", ignored.c_str()), (nullptr));
+    GST_DEBUG_OBJECT(self, "detector for %s, camera fx %g fy %g cx %g cy %g%s", s.families_text.c_str(), camera.fx,
+                     camera.fy, camera.cx, camera.cy, camera.calibrated ? "" : " (default)");
+  } catch (const std::exception& e) {
     if (!st.detector) {
-      GST_ELEMENT_ERROR (self, RESOURCE, SETTINGS, ("Invalid settings: %s.", e.what ()),
-          (nullptr));
+      GST_ELEMENT_ERROR(self, RESOURCE, SETTINGS, ("Invalid settings: %s.", e.what()), (nullptr));
       return FALSE;
     }
-    GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
-        ("Invalid settings: %s; the detector keeps the previous ones.", e.what ()),
-        (nullptr));
+    GST_ELEMENT_WARNING(self, RESOURCE, SETTINGS,
+                        ("Invalid settings: %s; the detector keeps the previous ones.", e.what()), (nullptr));
     st.rejected = s.detector;
   }
   return TRUE;
 }
 
 /* The frame's luma as 8-bit grey: plane 0 itself, or computed from RGB. */
-static lftag::ImageView
-gst_lftag_detect_luma (State & st, GstVideoFrame * frame)
-{
-  const int width = GST_VIDEO_FRAME_WIDTH (frame), height = GST_VIDEO_FRAME_HEIGHT (frame);
-  auto *data = static_cast < std::uint8_t * >(GST_VIDEO_FRAME_PLANE_DATA (frame, 0));
-  const int stride = GST_VIDEO_FRAME_PLANE_STRIDE (frame, 0);
+static lftag::ImageView gst_lftag_detect_luma(State& st, GstVideoFrame* frame) {
+  const int width = GST_VIDEO_FRAME_WIDTH(frame), height = GST_VIDEO_FRAME_HEIGHT(frame);
+  auto* data = static_cast<std::uint8_t*>(GST_VIDEO_FRAME_PLANE_DATA(frame, 0));
+  const int stride = GST_VIDEO_FRAME_PLANE_STRIDE(frame, 0);
 
   if (st.luma_scale > 0) {
     /* Only the luma plane is converted, little-endian as the formats say. */
-    const cv::Mat wide (height, width, CV_16UC1, data, std::size_t (stride));
-    wide.convertTo (st.luma, CV_8U, st.luma_scale);
-    return lftag::ImageView (st.luma);
+    const cv::Mat wide(height, width, CV_16UC1, data, std::size_t(stride));
+    wide.convertTo(st.luma, CV_8U, st.luma_scale);
+    return lftag::ImageView(st.luma);
   }
-  if (st.luma_weights.empty ())
-    return lftag::ImageView (data, width, height, stride);
-  const cv::Mat packed (height, width, CV_8UC (st.luma_weights.cols), data,
-      std::size_t (stride));
-  cv::transform (packed, st.luma, st.luma_weights);
-  return lftag::ImageView (st.luma);
+  if (st.luma_weights.empty()) return lftag::ImageView(data, width, height, stride);
+  const cv::Mat packed(height, width, CV_8UC(st.luma_weights.cols), data, std::size_t(stride));
+  cv::transform(packed, st.luma, st.luma_weights);
+  return lftag::ImageView(st.luma);
 }
 
 /* The overlay: attached as a GstVideoOverlayCompositionMeta when downstream said
  * in the allocation query that it draws them (the frame is then not written, and
  * a frame shared with a tee is not copied), blended into the frame otherwise. */
-static void
-gst_lftag_detect_draw (GstLFTagDetect * self, GstBuffer * buffer, const GstVideoInfo * info,
-    const Settings & s, const Camera & camera, const std::vector<Detection> & detections)
-{
-  State & st = *self->state;
-  GstPad *srcpad = GST_BASE_TRANSFORM_SRC_PAD (self);
-  if (g_atomic_int_compare_and_exchange (&self->downstream_changed, 1, 0))
-    st.ask_downstream = true;
+static void gst_lftag_detect_draw(GstLFTagDetect* self, GstBuffer* buffer, const GstVideoInfo* info, const Settings& s,
+                                  const Camera& camera, const std::vector<Detection>& detections) {
+  State& st = *self->state;
+  GstPad* srcpad = GST_BASE_TRANSFORM_SRC_PAD(self);
+  if (g_atomic_int_compare_and_exchange(&self->downstream_changed, 1, 0)) st.ask_downstream = true;
   if (st.ask_downstream) {
-    GstCaps *caps = gst_pad_get_current_caps (srcpad);
-    st.attach_composition = lftag::gst::downstream_takes_compositions (srcpad, caps);
-    if (caps)
-      gst_caps_unref (caps);
+    GstCaps* caps = gst_pad_get_current_caps(srcpad);
+    st.attach_composition = lftag::gst::downstream_takes_compositions(srcpad, caps);
+    if (caps) gst_caps_unref(caps);
     st.ask_downstream = false;
-    GST_DEBUG_OBJECT (self, "the overlay is %s", st.attach_composition ?
-        "attached as a GstVideoOverlayCompositionMeta" : "blended into the frames");
+    GST_DEBUG_OBJECT(
+        self, "the overlay is %s",
+        st.attach_composition ? "attached as a GstVideoOverlayCompositionMeta" : "blended into the frames");
   }
 
   lftag::DrawOptions options;
   options.outline = s.overlay & GST_LFTAG_DETECT_OVERLAY_OUTLINE;
   options.id = s.overlay & GST_LFTAG_DETECT_OVERLAY_ID;
   options.axes = s.overlay & GST_LFTAG_DETECT_OVERLAY_AXES;
-  GstVideoOverlayComposition *composition = nullptr;
+  GstVideoOverlayComposition* composition = nullptr;
   try {
-    composition = st.overlay.compose (GST_VIDEO_INFO_WIDTH (info),
-        GST_VIDEO_INFO_HEIGHT (info), options, camera, detections);
-  } catch (const std::exception & e) {
-    GST_WARNING_OBJECT (self, "overlay failed: %s", e.what ());
-    st.overlay.reset ();        /* it may hold a half-drawn frame */
+    composition =
+        st.overlay.compose(GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), options, camera, detections);
+  } catch (const std::exception& e) {
+    GST_WARNING_OBJECT(self, "overlay failed: %s", e.what());
+    st.overlay.reset(); /* it may hold a half-drawn frame */
     return;
   }
   if (st.attach_composition) {
-    lftag::gst::attach_composition (buffer, composition);
+    lftag::gst::attach_composition(buffer, composition);
   } else {
     GstVideoFrame frame;
-    if (gst_video_frame_map (&frame, info, buffer, GST_MAP_READWRITE)) {
-      gst_video_overlay_composition_blend (composition, &frame);
-      gst_video_frame_unmap (&frame);
+    if (gst_video_frame_map(&frame, info, buffer, GST_MAP_READWRITE)) {
+      gst_video_overlay_composition_blend(composition, &frame);
+      gst_video_frame_unmap(&frame);
     } else {
-      GST_WARNING_OBJECT (self, "cannot map %" GST_PTR_FORMAT " to draw on it", buffer);
+      GST_WARNING_OBJECT(self, "cannot map %" GST_PTR_FORMAT " to draw on it", buffer);
     }
   }
-  gst_video_overlay_composition_unref (composition);
+  gst_video_overlay_composition_unref(composition);
 }
 
 /* Remembers downstream's QoS reports (the base class would drop late frames on
  * them, which is switched off), then lets the base class pass them upstream. */
-static gboolean
-gst_lftag_detect_src_event (GstBaseTransform * trans, GstEvent * event)
-{
-  GstLFTagDetect *self = GST_LFTAG_DETECT (trans);
+static gboolean gst_lftag_detect_src_event(GstBaseTransform* trans, GstEvent* event) {
+  GstLFTagDetect* self = GST_LFTAG_DETECT(trans);
 
-  if (GST_EVENT_TYPE (event) == GST_EVENT_QOS) {
+  if (GST_EVENT_TYPE(event) == GST_EVENT_QOS) {
     GstQOSType type;
     gdouble proportion;
     GstClockTimeDiff diff;
     GstClockTime timestamp;
-    gst_event_parse_qos (event, &type, &proportion, &diff, &timestamp);
-    GST_OBJECT_LOCK (self);
-    if (GST_CLOCK_TIME_IS_VALID (timestamp)) {
+    gst_event_parse_qos(event, &type, &proportion, &diff, &timestamp);
+    GST_OBJECT_LOCK(self);
+    if (GST_CLOCK_TIME_IS_VALID(timestamp)) {
       /* A late frame (diff > 0) means the next ones are late by as much again. */
-      self->lateness.earliest = diff > 0 ? timestamp + 2 * GstClockTime (diff) :
-          GstClockTime (std::max < GstClockTimeDiff > (0, GstClockTimeDiff (timestamp) + diff));
+      self->lateness.earliest = diff > 0
+                                    ? timestamp + 2 * GstClockTime(diff)
+                                    : GstClockTime(std::max<GstClockTimeDiff>(0, GstClockTimeDiff(timestamp) + diff));
       self->lateness.proportion = proportion;
     }
-    GST_OBJECT_UNLOCK (self);
-  } else if (GST_EVENT_TYPE (event) == GST_EVENT_FLUSH_START) {
-    GST_OBJECT_LOCK (self);
+    GST_OBJECT_UNLOCK(self);
+  } else if (GST_EVENT_TYPE(event) == GST_EVENT_FLUSH_START) {
+    GST_OBJECT_LOCK(self);
     self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
-    GST_OBJECT_UNLOCK (self);
-  } else if (GST_EVENT_TYPE (event) == GST_EVENT_RECONFIGURE) {
+    GST_OBJECT_UNLOCK(self);
+  } else if (GST_EVENT_TYPE(event) == GST_EVENT_RECONFIGURE) {
     /* A new sink may draw compositions where the last one did not, or not. */
-    g_atomic_int_set (&self->downstream_changed, 1);
+    g_atomic_int_set(&self->downstream_changed, 1);
   }
-  return GST_BASE_TRANSFORM_CLASS (parent_class)->src_event (trans, event);
+  return GST_BASE_TRANSFORM_CLASS(parent_class)->src_event(trans, event);
 }
 
 /* Whether downstream's last QoS report makes this buffer late. */
-static bool
-gst_lftag_detect_is_late (GstLFTagDetect * self, GstBuffer * buffer, gdouble * proportion,
-    GstClockTimeDiff * jitter)
-{
-  const GstSegment *segment = &GST_BASE_TRANSFORM (self)->segment;
-  if (segment->format != GST_FORMAT_TIME || !GST_BUFFER_PTS_IS_VALID (buffer))
-    return false;
-  const GstClockTime running = gst_segment_to_running_time (segment, GST_FORMAT_TIME,
-      GST_BUFFER_PTS (buffer));
-  GST_OBJECT_LOCK (self);
+static bool gst_lftag_detect_is_late(GstLFTagDetect* self, GstBuffer* buffer, gdouble* proportion,
+                                     GstClockTimeDiff* jitter) {
+  const GstSegment* segment = &GST_BASE_TRANSFORM(self)->segment;
+  if (segment->format != GST_FORMAT_TIME || !GST_BUFFER_PTS_IS_VALID(buffer)) return false;
+  const GstClockTime running = gst_segment_to_running_time(segment, GST_FORMAT_TIME, GST_BUFFER_PTS(buffer));
+  GST_OBJECT_LOCK(self);
   const Lateness l = self->lateness;
-  GST_OBJECT_UNLOCK (self);
-  if (!GST_CLOCK_TIME_IS_VALID (running) || !GST_CLOCK_TIME_IS_VALID (l.earliest)
-      || running > l.earliest)
-    return false;
+  GST_OBJECT_UNLOCK(self);
+  if (!GST_CLOCK_TIME_IS_VALID(running) || !GST_CLOCK_TIME_IS_VALID(l.earliest) || running > l.earliest) return false;
   *proportion = l.proportion;
-  *jitter = GstClockTimeDiff (l.earliest) - GstClockTimeDiff (running);
+  *jitter = GstClockTimeDiff(l.earliest) - GstClockTimeDiff(running);
   return true;
 }
 
 /* A late frame passed on unanalysed: a meta that says so, and a QoS message
  * counting it, as GStreamer elements report frames they degrade. */
-static void
-gst_lftag_detect_skip_late (GstLFTagDetect * self, GstBuffer * buffer,
-    const GstVideoInfo * info, gdouble proportion, GstClockTimeDiff jitter)
-{
-  State & st = *self->state;
+static void gst_lftag_detect_skip_late(GstLFTagDetect* self, GstBuffer* buffer, const GstVideoInfo* info,
+                                       gdouble proportion, GstClockTimeDiff jitter) {
+  State& st = *self->state;
   ++st.skipped;
-  lftag::gst::attach_unanalysed (buffer, GST_VIDEO_INFO_WIDTH (info),
-      GST_VIDEO_INFO_HEIGHT (info));
+  lftag::gst::attach_unanalysed(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info));
 
-  const GstSegment *segment = &GST_BASE_TRANSFORM (self)->segment;
-  const GstClockTime pts = GST_BUFFER_PTS (buffer);
-  GstMessage *qos = gst_message_new_qos (GST_OBJECT (self), FALSE,
-      gst_segment_to_running_time (segment, GST_FORMAT_TIME, pts),
-      gst_segment_to_stream_time (segment, GST_FORMAT_TIME, pts), pts,
-      GST_BUFFER_DURATION (buffer));
-  gst_message_set_qos_values (qos, jitter, proportion, 1000000);
-  gst_message_set_qos_stats (qos, GST_FORMAT_BUFFERS, st.analysed, st.skipped);
-  gst_element_post_message (GST_ELEMENT (self), qos);
-  GST_DEBUG_OBJECT (self, "late by %" GST_STIME_FORMAT ": %" GST_TIME_FORMAT
-      " passed on unanalysed", GST_STIME_ARGS (jitter), GST_TIME_ARGS (pts));
+  const GstSegment* segment = &GST_BASE_TRANSFORM(self)->segment;
+  const GstClockTime pts = GST_BUFFER_PTS(buffer);
+  GstMessage* qos =
+      gst_message_new_qos(GST_OBJECT(self), FALSE, gst_segment_to_running_time(segment, GST_FORMAT_TIME, pts),
+                          gst_segment_to_stream_time(segment, GST_FORMAT_TIME, pts), pts, GST_BUFFER_DURATION(buffer));
+  gst_message_set_qos_values(qos, jitter, proportion, 1000000);
+  gst_message_set_qos_stats(qos, GST_FORMAT_BUFFERS, st.analysed, st.skipped);
+  gst_element_post_message(GST_ELEMENT(self), qos);
+  GST_DEBUG_OBJECT(self, "late by %" GST_STIME_FORMAT ": %" GST_TIME_FORMAT " passed on unanalysed",
+                   GST_STIME_ARGS(jitter), GST_TIME_ARGS(pts));
 }
 
-static GstFlowReturn
-gst_lftag_detect_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
-{
-  GstLFTagDetect *self = GST_LFTAG_DETECT (trans);
-  GstVideoInfo *info = &GST_VIDEO_FILTER (self)->in_info;
-  State & st = *self->state;
-  const Settings s = gst_lftag_detect_settings (self);
+static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstBuffer* buffer) {
+  GstLFTagDetect* self = GST_LFTAG_DETECT(trans);
+  GstVideoInfo* info = &GST_VIDEO_FILTER(self)->in_info;
+  State& st = *self->state;
+  const Settings s = gst_lftag_detect_settings(self);
 
-  if (GST_VIDEO_INFO_FORMAT (info) == GST_VIDEO_FORMAT_UNKNOWN) {
-    GST_ELEMENT_ERROR (self, CORE, NEGOTIATION, (nullptr),
-        ("format wasn't negotiated before the first frame"));
+  if (GST_VIDEO_INFO_FORMAT(info) == GST_VIDEO_FORMAT_UNKNOWN) {
+    GST_ELEMENT_ERROR(self, CORE, NEGOTIATION, (nullptr), ("format wasn't negotiated before the first frame"));
     return GST_FLOW_NOT_NEGOTIATED;
   }
-  if (!gst_lftag_detect_update_detector (self, s, info))
-    return GST_FLOW_ERROR;
+  if (!gst_lftag_detect_update_detector(self, s, info)) return GST_FLOW_ERROR;
 
   gdouble proportion;
   GstClockTimeDiff jitter;
-  if (s.late_frames == GST_LFTAG_DETECT_LATE_FRAMES_SKIP
-      && gst_lftag_detect_is_late (self, buffer, &proportion, &jitter)) {
-    gst_lftag_detect_skip_late (self, buffer, info, proportion, jitter);
+  if (s.late_frames == GST_LFTAG_DETECT_LATE_FRAMES_SKIP &&
+      gst_lftag_detect_is_late(self, buffer, &proportion, &jitter)) {
+    gst_lftag_detect_skip_late(self, buffer, info, proportion, jitter);
     return GST_FLOW_OK;
   }
 
-  const Camera & camera = st.detector->params ().camera;
+  const Camera& camera = *st.detector->params().camera; /* always given */
   const bool metric = (s.overlay & GST_LFTAG_DETECT_OVERLAY_AXES) || s.tag_size_set;
   if (metric && !camera.calibrated && !st.warned_uncalibrated) {
-    GST_ELEMENT_WARNING (self, RESOURCE, SETTINGS,
-        ("No camera calibration: poses assume the default camera (fx = fy = frame "
-            "width, centred) and are marked uncalibrated, so distances and axes are "
-            "not metric. Set calibration-file, or fx, fy, cx and cy."), (nullptr));
+    GST_ELEMENT_WARNING(self, RESOURCE, SETTINGS,
+                        ("No camera calibration: poses assume the default camera (fx = fy = frame "
+                         "width, centred) and are marked uncalibrated, so distances and axes are "
+                         "not metric. Set calibration-file, or fx, fy, cx and cy."),
+                        (nullptr));
     st.warned_uncalibrated = true;
   }
 
   /* Detection reads the frame only: a shared frame is not copied. */
   GstVideoFrame frame;
-  if (!gst_video_frame_map (&frame, info, buffer, GST_MAP_READ)) {
-    GST_WARNING_OBJECT (self, "cannot map %" GST_PTR_FORMAT ", passed on unanalysed",
-        buffer);
-    lftag::gst::attach_unanalysed (buffer, GST_VIDEO_INFO_WIDTH (info),
-      GST_VIDEO_INFO_HEIGHT (info));
+  if (!gst_video_frame_map(&frame, info, buffer, GST_MAP_READ)) {
+    GST_WARNING_OBJECT(self, "cannot map %" GST_PTR_FORMAT ", passed on unanalysed", buffer);
+    lftag::gst::attach_unanalysed(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info));
     return GST_FLOW_OK;
   }
   std::vector<Detection> detections;
   lftag::DetectionStats stats;
   try {
-    detections = st.detector->detect (gst_lftag_detect_luma (st, &frame), &stats);
-  } catch (const std::exception & e) {
-    gst_video_frame_unmap (&frame);
-    GST_WARNING_OBJECT (self, "detection failed on %" GST_PTR_FORMAT
-        ", passed on unanalysed: %s", buffer, e.what ());
-    lftag::gst::attach_unanalysed (buffer, GST_VIDEO_INFO_WIDTH (info),
-      GST_VIDEO_INFO_HEIGHT (info));
+    detections = st.detector->detect(gst_lftag_detect_luma(st, &frame), &stats);
+  } catch (const std::exception& e) {
+    gst_video_frame_unmap(&frame);
+    GST_WARNING_OBJECT(self, "detection failed on %" GST_PTR_FORMAT ", passed on unanalysed: %s", buffer, e.what());
+    lftag::gst::attach_unanalysed(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info));
     return GST_FLOW_OK;
   }
-  gst_video_frame_unmap (&frame);
+  gst_video_frame_unmap(&frame);
   ++st.analysed;
-  GST_LOG_OBJECT (self, "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT,
-      detections.size (), GST_TIME_ARGS (GST_BUFFER_PTS (buffer)));
+  GST_LOG_OBJECT(self, "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT, detections.size(),
+                 GST_TIME_ARGS(GST_BUFFER_PTS(buffer)));
   if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0) && !st.warned_budget) {
-    GST_ELEMENT_WARNING (self, STREAM, FAILED,
-        ("The frame at %" GST_TIME_FORMAT " held more candidate markers than the "
-            "per-frame budget allows (max-candidates=%d): %" G_GINT64_FORMAT
-            " candidates and %" G_GINT64_FORMAT " second looks were skipped, the most "
-            "plausible candidates examined first. Markers may be missed in such frames; "
-            "this is reported once per stream.", GST_TIME_ARGS (GST_BUFFER_PTS (buffer)),
-            s.detector.max_candidates, stats.skipped_by_budget, stats.second_looks_skipped),
-        (nullptr));
+    GST_ELEMENT_WARNING(self, STREAM, FAILED,
+                        ("The frame at %" GST_TIME_FORMAT " held more candidate markers than the "
+                         "per-frame budget allows (max-candidates=%d): %" G_GINT64_FORMAT
+                         " candidates and %" G_GINT64_FORMAT " second looks were skipped, the most "
+                         "plausible candidates examined first. Markers may be missed in such frames; "
+                         "this is reported once per stream.",
+                         GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), s.detector.max_candidates, stats.skipped_by_budget,
+                         stats.second_looks_skipped),
+                        (nullptr));
     st.warned_budget = true;
   }
 
-  lftag::gst::attach_detections (buffer, GST_VIDEO_INFO_WIDTH (info),
-      GST_VIDEO_INFO_HEIGHT (info), detections);
+  lftag::gst::attach_detections(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections);
 
-  if (s.overlay && !detections.empty ())
-    gst_lftag_detect_draw (self, buffer, info, s, camera, detections);
+  if (s.overlay && !detections.empty()) gst_lftag_detect_draw(self, buffer, info, s, camera, detections);
 
-  if (GstMessage * message = st.messages.frame (GST_OBJECT (self), s.messages,
-          GST_BASE_TRANSFORM (self)->segment, buffer, GST_VIDEO_INFO_WIDTH (info),
-          GST_VIDEO_INFO_HEIGHT (info), detections))
-    gst_element_post_message (GST_ELEMENT (self), message);
+  if (GstMessage* message = st.messages.frame(GST_OBJECT(self), s.messages, GST_BASE_TRANSFORM(self)->segment, buffer,
+                                              GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections))
+    gst_element_post_message(GST_ELEMENT(self), message);
   return GST_FLOW_OK;
 }

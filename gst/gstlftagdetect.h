@@ -7,8 +7,8 @@
 
 G_BEGIN_DECLS
 
-#define GST_TYPE_LFTAG_DETECT (gst_lftag_detect_get_type ())
-G_DECLARE_FINAL_TYPE (GstLFTagDetect, gst_lftag_detect, GST, LFTAG_DETECT, GstVideoFilter)
+#define GST_TYPE_LFTAG_DETECT (gst_lftag_detect_get_type())
+G_DECLARE_FINAL_TYPE(GstLFTagDetect, gst_lftag_detect, GST, LFTAG_DETECT, GstVideoFilter)
 
 /**
  * GstLFTagDetectOverlay:
@@ -42,7 +42,7 @@ typedef enum {
   GST_LFTAG_DETECT_LATE_FRAMES_SKIP = 1,
 } GstLFTagDetectLateFrames;
 
-GST_ELEMENT_REGISTER_DECLARE (lftagdetect);
+GST_ELEMENT_REGISTER_DECLARE(lftagdetect);
 
 G_END_DECLS
 

@@ -42,11 +42,10 @@
 
 #include "lftagjson.h"
 
-GST_DEBUG_CATEGORY_STATIC (gst_lftag_publish_debug);
+GST_DEBUG_CATEGORY_STATIC(gst_lftag_publish_debug);
 #define GST_CAT_DEFAULT gst_lftag_publish_debug
 
-enum
-{
+enum {
   PROP_0,
   PROP_LOCATION,
   PROP_APPEND,
@@ -55,250 +54,205 @@ enum
 #define DEFAULT_PROP_LOCATION nullptr
 #define DEFAULT_PROP_APPEND FALSE
 
-static GstStaticPadTemplate sink_template = GST_STATIC_PAD_TEMPLATE ("sink",
-    GST_PAD_SINK, GST_PAD_ALWAYS, GST_STATIC_CAPS_ANY);
-static GstStaticPadTemplate src_template = GST_STATIC_PAD_TEMPLATE ("src",
-    GST_PAD_SRC, GST_PAD_ALWAYS, GST_STATIC_CAPS_ANY);
+static GstStaticPadTemplate sink_template =
+    GST_STATIC_PAD_TEMPLATE("sink", GST_PAD_SINK, GST_PAD_ALWAYS, GST_STATIC_CAPS_ANY);
+static GstStaticPadTemplate src_template =
+    GST_STATIC_PAD_TEMPLATE("src", GST_PAD_SRC, GST_PAD_ALWAYS, GST_STATIC_CAPS_ANY);
 
-struct _GstLFTagPublish
-{
+struct _GstLFTagPublish {
   GstBaseTransform parent;
 
   /* Properties, under the object lock. */
-  gchar *location;
+  gchar* location;
   gboolean append;
 
   /* Streaming state: opened in start(), closed in stop(). */
-  FILE *file;
-  gchar *opened;                /* the location as opened, for messages */
+  FILE* file;
+  gchar* opened; /* the location as opened, for messages */
   guint64 frame;
   gboolean warned_no_meta;
 };
 
-static void gst_lftag_publish_set_property (GObject * object, guint prop_id,
-    const GValue * value, GParamSpec * pspec);
-static void gst_lftag_publish_get_property (GObject * object, guint prop_id,
-    GValue * value, GParamSpec * pspec);
-static void gst_lftag_publish_finalize (GObject * object);
-static gboolean gst_lftag_publish_start (GstBaseTransform * trans);
-static gboolean gst_lftag_publish_stop (GstBaseTransform * trans);
-static gboolean gst_lftag_publish_sink_event (GstBaseTransform * trans, GstEvent * event);
-static GstFlowReturn gst_lftag_publish_transform_ip (GstBaseTransform * trans,
-    GstBuffer * buffer);
+static void gst_lftag_publish_set_property(GObject* object, guint prop_id, const GValue* value, GParamSpec* pspec);
+static void gst_lftag_publish_get_property(GObject* object, guint prop_id, GValue* value, GParamSpec* pspec);
+static void gst_lftag_publish_finalize(GObject* object);
+static gboolean gst_lftag_publish_start(GstBaseTransform* trans);
+static gboolean gst_lftag_publish_stop(GstBaseTransform* trans);
+static gboolean gst_lftag_publish_sink_event(GstBaseTransform* trans, GstEvent* event);
+static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, GstBuffer* buffer);
 
 #define gst_lftag_publish_parent_class parent_class
-G_DEFINE_TYPE (GstLFTagPublish, gst_lftag_publish, GST_TYPE_BASE_TRANSFORM);
-GST_ELEMENT_REGISTER_DEFINE (lftagpublish, "lftagpublish", GST_RANK_NONE,
-    GST_TYPE_LFTAG_PUBLISH);
+G_DEFINE_TYPE(GstLFTagPublish, gst_lftag_publish, GST_TYPE_BASE_TRANSFORM);
+GST_ELEMENT_REGISTER_DEFINE(lftagpublish, "lftagpublish", GST_RANK_NONE, GST_TYPE_LFTAG_PUBLISH);
 
-static void
-gst_lftag_publish_class_init (GstLFTagPublishClass * klass)
-{
-  GObjectClass *gobject_class = G_OBJECT_CLASS (klass);
-  GstElementClass *element_class = GST_ELEMENT_CLASS (klass);
-  GstBaseTransformClass *trans_class = GST_BASE_TRANSFORM_CLASS (klass);
-  const auto ready = GParamFlags (G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS |
-      GST_PARAM_MUTABLE_READY);
+static void gst_lftag_publish_class_init(GstLFTagPublishClass* klass) {
+  GObjectClass* gobject_class = G_OBJECT_CLASS(klass);
+  GstElementClass* element_class = GST_ELEMENT_CLASS(klass);
+  GstBaseTransformClass* trans_class = GST_BASE_TRANSFORM_CLASS(klass);
+  const auto ready = GParamFlags(G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS | GST_PARAM_MUTABLE_READY);
 
-  GST_DEBUG_CATEGORY_INIT (gst_lftag_publish_debug, "lftagpublish", 0,
-      "LFTag detections as JSON Lines");
+  GST_DEBUG_CATEGORY_INIT(gst_lftag_publish_debug, "lftagpublish", 0, "LFTag detections as JSON Lines");
 
   gobject_class->set_property = gst_lftag_publish_set_property;
   gobject_class->get_property = gst_lftag_publish_get_property;
   gobject_class->finalize = gst_lftag_publish_finalize;
 
-  g_object_class_install_property (gobject_class, PROP_LOCATION,
-      g_param_spec_string ("location", "Location",
-          "File to write the JSON Lines to; unset, empty or \"-\": the standard output",
-          DEFAULT_PROP_LOCATION, ready));
-  g_object_class_install_property (gobject_class, PROP_APPEND,
-      g_param_spec_boolean ("append", "Append",
-          "Append to the file instead of replacing it",
-          DEFAULT_PROP_APPEND, ready));
+  g_object_class_install_property(
+      gobject_class, PROP_LOCATION,
+      g_param_spec_string("location", "Location",
+                          "File to write the JSON Lines to; unset, empty or \"-\": the standard output",
+                          DEFAULT_PROP_LOCATION, ready));
+  g_object_class_install_property(gobject_class, PROP_APPEND,
+                                  g_param_spec_boolean("append", "Append", "Append to the file instead of replacing it",
+                                                       DEFAULT_PROP_APPEND, ready));
 
-  gst_element_class_set_static_metadata (element_class,
-      "LFTag detections as JSON Lines", "Filter/Metadata",
-      "Writes the LFTag detections of each buffer (its LFTagMeta, from lftagdetect) "
-      "with its timestamps as one JSON line to a file or the standard output, and "
-      "passes the buffers on untouched", LFTAG_AUTHOR);
-  gst_element_class_add_static_pad_template (element_class, &sink_template);
-  gst_element_class_add_static_pad_template (element_class, &src_template);
+  gst_element_class_set_static_metadata(element_class, "LFTag detections as JSON Lines", "Filter/Metadata",
+                                        "Writes the LFTag detections of each buffer (its LFTagMeta, from lftagdetect) "
+                                        "with its timestamps as one JSON line to a file or the standard output, and "
+                                        "passes the buffers on untouched",
+                                        LFTAG_AUTHOR);
+  gst_element_class_add_static_pad_template(element_class, &sink_template);
+  gst_element_class_add_static_pad_template(element_class, &src_template);
 
-  trans_class->start = GST_DEBUG_FUNCPTR (gst_lftag_publish_start);
-  trans_class->stop = GST_DEBUG_FUNCPTR (gst_lftag_publish_stop);
-  trans_class->sink_event = GST_DEBUG_FUNCPTR (gst_lftag_publish_sink_event);
-  trans_class->transform_ip = GST_DEBUG_FUNCPTR (gst_lftag_publish_transform_ip);
+  trans_class->start = GST_DEBUG_FUNCPTR(gst_lftag_publish_start);
+  trans_class->stop = GST_DEBUG_FUNCPTR(gst_lftag_publish_stop);
+  trans_class->sink_event = GST_DEBUG_FUNCPTR(gst_lftag_publish_sink_event);
+  trans_class->transform_ip = GST_DEBUG_FUNCPTR(gst_lftag_publish_transform_ip);
 }
 
-static void
-gst_lftag_publish_init (GstLFTagPublish * self)
-{
+static void gst_lftag_publish_init(GstLFTagPublish* self) {
   self->location = nullptr;
   self->append = DEFAULT_PROP_APPEND;
   self->file = nullptr;
   self->opened = nullptr;
   /* Like identity: buffers pass untouched, transform_ip only looks at them. */
-  gst_base_transform_set_passthrough (GST_BASE_TRANSFORM (self), TRUE);
-  gst_base_transform_set_gap_aware (GST_BASE_TRANSFORM (self), TRUE);
+  gst_base_transform_set_passthrough(GST_BASE_TRANSFORM(self), TRUE);
+  gst_base_transform_set_gap_aware(GST_BASE_TRANSFORM(self), TRUE);
 }
 
-static void
-gst_lftag_publish_finalize (GObject * object)
-{
-  GstLFTagPublish *self = GST_LFTAG_PUBLISH (object);
+static void gst_lftag_publish_finalize(GObject* object) {
+  GstLFTagPublish* self = GST_LFTAG_PUBLISH(object);
 
-  g_free (self->location);
-  g_free (self->opened);
-  G_OBJECT_CLASS (parent_class)->finalize (object);
+  g_free(self->location);
+  g_free(self->opened);
+  G_OBJECT_CLASS(parent_class)->finalize(object);
 }
 
-static void
-gst_lftag_publish_set_property (GObject * object, guint prop_id,
-    const GValue * value, GParamSpec * pspec)
-{
-  GstLFTagPublish *self = GST_LFTAG_PUBLISH (object);
+static void gst_lftag_publish_set_property(GObject* object, guint prop_id, const GValue* value, GParamSpec* pspec) {
+  GstLFTagPublish* self = GST_LFTAG_PUBLISH(object);
 
-  GST_OBJECT_LOCK (self);
+  GST_OBJECT_LOCK(self);
   switch (prop_id) {
     case PROP_LOCATION:
-      g_free (self->location);
-      self->location = g_value_dup_string (value);
+      g_free(self->location);
+      self->location = g_value_dup_string(value);
       break;
-    case PROP_APPEND:
-      self->append = g_value_get_boolean (value);
-      break;
-    default:
-      G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
-      break;
+    case PROP_APPEND: self->append = g_value_get_boolean(value); break;
+    default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
-  GST_OBJECT_UNLOCK (self);
+  GST_OBJECT_UNLOCK(self);
 }
 
-static void
-gst_lftag_publish_get_property (GObject * object, guint prop_id, GValue * value,
-    GParamSpec * pspec)
-{
-  GstLFTagPublish *self = GST_LFTAG_PUBLISH (object);
+static void gst_lftag_publish_get_property(GObject* object, guint prop_id, GValue* value, GParamSpec* pspec) {
+  GstLFTagPublish* self = GST_LFTAG_PUBLISH(object);
 
-  GST_OBJECT_LOCK (self);
+  GST_OBJECT_LOCK(self);
   switch (prop_id) {
-    case PROP_LOCATION:
-      g_value_set_string (value, self->location);
-      break;
-    case PROP_APPEND:
-      g_value_set_boolean (value, self->append);
-      break;
-    default:
-      G_OBJECT_WARN_INVALID_PROPERTY_ID (object, prop_id, pspec);
-      break;
+    case PROP_LOCATION: g_value_set_string(value, self->location); break;
+    case PROP_APPEND: g_value_set_boolean(value, self->append); break;
+    default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
-  GST_OBJECT_UNLOCK (self);
+  GST_OBJECT_UNLOCK(self);
 }
 
-static gboolean
-gst_lftag_publish_start (GstBaseTransform * trans)
-{
-  GstLFTagPublish *self = GST_LFTAG_PUBLISH (trans);
+static gboolean gst_lftag_publish_start(GstBaseTransform* trans) {
+  GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
 
-  GST_OBJECT_LOCK (self);
+  GST_OBJECT_LOCK(self);
   const std::string location = self->location ? self->location : "";
   const gboolean append = self->append;
-  GST_OBJECT_UNLOCK (self);
+  GST_OBJECT_UNLOCK(self);
 
   self->frame = 0;
   self->warned_no_meta = FALSE;
-  g_free (self->opened);
-  if (location.empty () || location == "-") {
+  g_free(self->opened);
+  if (location.empty() || location == "-") {
     self->file = stdout;
-    self->opened = g_strdup ("the standard output");
+    self->opened = g_strdup("the standard output");
     return TRUE;
   }
-  self->file = fopen (location.c_str (), append ? "a" : "w");
+  self->file = fopen(location.c_str(), append ? "a" : "w");
   if (!self->file) {
     const int error = errno;
     self->opened = nullptr;
-    GST_ELEMENT_ERROR (self, RESOURCE, OPEN_WRITE,
-        ("Could not open \"%s\" for writing: %s.", location.c_str (),
-            g_strerror (error)), (nullptr));
+    GST_ELEMENT_ERROR(self, RESOURCE, OPEN_WRITE,
+                      ("Could not open \"%s\" for writing: %s.", location.c_str(), g_strerror(error)), (nullptr));
     return FALSE;
   }
-  self->opened = g_strdup_printf ("\"%s\"", location.c_str ());
-  GST_INFO_OBJECT (self, "writing to %s", self->opened);
+  self->opened = g_strdup_printf("\"%s\"", location.c_str());
+  GST_INFO_OBJECT(self, "writing to %s", self->opened);
   return TRUE;
 }
 
 /* Flushes what was written; FALSE (with an error posted) when it failed. */
-static gboolean
-gst_lftag_publish_flush (GstLFTagPublish * self)
-{
-  if (!self->file || fflush (self->file) == 0)
-    return TRUE;
-  GST_ELEMENT_ERROR (self, RESOURCE, WRITE,
-      ("Could not write to %s: %s.", self->opened, g_strerror (errno)), (nullptr));
+static gboolean gst_lftag_publish_flush(GstLFTagPublish* self) {
+  if (!self->file || fflush(self->file) == 0) return TRUE;
+  GST_ELEMENT_ERROR(self, RESOURCE, WRITE, ("Could not write to %s: %s.", self->opened, g_strerror(errno)), (nullptr));
   return FALSE;
 }
 
-static gboolean
-gst_lftag_publish_stop (GstBaseTransform * trans)
-{
-  GstLFTagPublish *self = GST_LFTAG_PUBLISH (trans);
-  gboolean ok = gst_lftag_publish_flush (self);
+static gboolean gst_lftag_publish_stop(GstBaseTransform* trans) {
+  GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
+  gboolean ok = gst_lftag_publish_flush(self);
 
-  if (self->file && self->file != stdout && fclose (self->file) != 0 && ok) {
-    GST_ELEMENT_ERROR (self, RESOURCE, CLOSE,
-        ("Could not close %s: %s.", self->opened, g_strerror (errno)), (nullptr));
+  if (self->file && self->file != stdout && fclose(self->file) != 0 && ok) {
+    GST_ELEMENT_ERROR(self, RESOURCE, CLOSE, ("Could not close %s: %s.", self->opened, g_strerror(errno)), (nullptr));
     ok = FALSE;
   }
   self->file = nullptr;
   return ok;
 }
 
-static gboolean
-gst_lftag_publish_sink_event (GstBaseTransform * trans, GstEvent * event)
-{
-  GstLFTagPublish *self = GST_LFTAG_PUBLISH (trans);
+static gboolean gst_lftag_publish_sink_event(GstBaseTransform* trans, GstEvent* event) {
+  GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
 
   /* Everything is on disk before EOS reaches the sink (and the application). */
-  if (GST_EVENT_TYPE (event) == GST_EVENT_EOS && !gst_lftag_publish_flush (self)) {
-    gst_event_unref (event);
+  if (GST_EVENT_TYPE(event) == GST_EVENT_EOS && !gst_lftag_publish_flush(self)) {
+    gst_event_unref(event);
     return FALSE;
   }
-  return GST_BASE_TRANSFORM_CLASS (parent_class)->sink_event (trans, event);
+  return GST_BASE_TRANSFORM_CLASS(parent_class)->sink_event(trans, event);
 }
 
-static GstFlowReturn
-gst_lftag_publish_transform_ip (GstBaseTransform * trans, GstBuffer * buffer)
-{
-  GstLFTagPublish *self = GST_LFTAG_PUBLISH (trans);
+static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, GstBuffer* buffer) {
+  GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
   const guint64 frame = self->frame++;
 
   std::optional<nlohmann::ordered_json> record;
   try {
-    record = lftag::gst::buffer_json (buffer, trans->segment, frame);
-  } catch (const std::exception & e) {
-    GST_ELEMENT_WARNING (self, STREAM, DECODE, ("Malformed LFTagMeta: %s.", e.what ()),
-        ("on %" GST_PTR_FORMAT, buffer));
+    record = lftag::gst::buffer_json(buffer, trans->segment, frame);
+  } catch (const std::exception& e) {
+    GST_ELEMENT_WARNING(self, STREAM, DECODE, ("Malformed LFTagMeta: %s.", e.what()), ("on %" GST_PTR_FORMAT, buffer));
     return GST_FLOW_OK;
   }
   if (!record) {
     if (!self->warned_no_meta) {
-      GST_ELEMENT_WARNING (self, STREAM, FORMAT,
-          ("A buffer without LFTagMeta came: lftagpublish writes the detections of "
-              "lftagdetect, which must be upstream (muxers and files do not keep the "
-              "meta)."), ("first at %" GST_TIME_FORMAT,
-              GST_TIME_ARGS (GST_BUFFER_PTS (buffer))));
+      GST_ELEMENT_WARNING(self, STREAM, FORMAT,
+                          ("A buffer without LFTagMeta came: lftagpublish writes the detections of "
+                           "lftagdetect, which must be upstream (muxers and files do not keep the "
+                           "meta)."),
+                          ("first at %" GST_TIME_FORMAT, GST_TIME_ARGS(GST_BUFFER_PTS(buffer))));
       self->warned_no_meta = TRUE;
     }
     return GST_FLOW_OK;
   }
 
-  const std::string line = record->dump () + "\n";
+  const std::string line = record->dump() + "\n";
   /* One line at a time, so that a reader of a pipe or of a growing file sees
    * whole lines as the frames pass. */
-  if (fwrite (line.data (), 1, line.size (), self->file) != line.size ()
-      || fflush (self->file) != 0) {
-    GST_ELEMENT_ERROR (self, RESOURCE, WRITE,
-        ("Could not write to %s: %s.", self->opened, g_strerror (errno)), (nullptr));
+  if (fwrite(line.data(), 1, line.size(), self->file) != line.size() || fflush(self->file) != 0) {
+    GST_ELEMENT_ERROR(self, RESOURCE, WRITE, ("Could not write to %s: %s.", self->opened, g_strerror(errno)),
+                      (nullptr));
     return GST_FLOW_ERROR;
   }
   return GST_FLOW_OK;

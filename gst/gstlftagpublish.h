@@ -2,15 +2,15 @@
 #ifndef __GST_LFTAG_PUBLISH_H__
 #define __GST_LFTAG_PUBLISH_H__
 
-#include <gst/gst.h>
 #include <gst/base/gstbasetransform.h>
+#include <gst/gst.h>
 
 G_BEGIN_DECLS
 
-#define GST_TYPE_LFTAG_PUBLISH (gst_lftag_publish_get_type ())
-G_DECLARE_FINAL_TYPE (GstLFTagPublish, gst_lftag_publish, GST, LFTAG_PUBLISH, GstBaseTransform)
+#define GST_TYPE_LFTAG_PUBLISH (gst_lftag_publish_get_type())
+G_DECLARE_FINAL_TYPE(GstLFTagPublish, gst_lftag_publish, GST, LFTAG_PUBLISH, GstBaseTransform)
 
-GST_ELEMENT_REGISTER_DECLARE (lftagpublish);
+GST_ELEMENT_REGISTER_DECLARE(lftagpublish);
 
 G_END_DECLS
 

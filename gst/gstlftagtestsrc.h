@@ -7,8 +7,8 @@
 
 G_BEGIN_DECLS
 
-#define GST_TYPE_LFTAG_TEST_SRC (gst_lftag_test_src_get_type ())
-G_DECLARE_FINAL_TYPE (GstLFTagTestSrc, gst_lftag_test_src, GST, LFTAG_TEST_SRC, GstPushSrc)
+#define GST_TYPE_LFTAG_TEST_SRC (gst_lftag_test_src_get_type())
+G_DECLARE_FINAL_TYPE(GstLFTagTestSrc, gst_lftag_test_src, GST, LFTAG_TEST_SRC, GstPushSrc)
 
 /**
  * GstLFTagTestSrcBackground:
@@ -24,7 +24,7 @@ typedef enum {
   GST_LFTAG_TEST_SRC_BACKGROUND_PHOTO,
 } GstLFTagTestSrcBackground;
 
-GST_ELEMENT_REGISTER_DECLARE (lftagtestsrc);
+GST_ELEMENT_REGISTER_DECLARE(lftagtestsrc);
 
 G_END_DECLS
 

@@ -53,6 +53,8 @@
  *                                   position, marker units (0.35 is the limit)
  *   edge-score         gdouble      mean gradient along the inner border edge
  *   reprojection-error gdouble      RMS of the final pose over the centroids, pixels
+ *   from-outline       gboolean     read from the grey levels under its aligned outline
+ *                                   (far or blurred; decode-error and worst-cell are 0)
  * Truth only:
  *   centers            n^2 points   exact projected centres of the black squares
  *   fully-visible      gboolean     in front of the camera and wholly inside the frame
@@ -98,41 +100,34 @@ G_BEGIN_DECLS
 #define LFTAG_FIELD_DECODE_ERROR "decode-error"
 #define LFTAG_FIELD_WORST_CELL "worst-cell"
 #define LFTAG_FIELD_EDGE_SCORE "edge-score"
+#define LFTAG_FIELD_FROM_OUTLINE "from-outline"
 #define LFTAG_FIELD_REPROJECTION_ERROR "reprojection-error"
 #define LFTAG_FIELD_CENTERS "centers"
 #define LFTAG_FIELD_FULLY_VISIBLE "fully-visible"
 #define LFTAG_FIELD_EDGE_PX "edge-px"
 
 /* The structure of meta @meta_name on @buffer, or NULL when the buffer has none. */
-static inline const GstStructure *
-lftag_meta_get_structure (GstBuffer * buffer, const gchar * meta_name)
-{
-  GstCustomMeta *meta = gst_buffer_get_custom_meta (buffer, meta_name);
-  return meta ? gst_custom_meta_get_structure (meta) : NULL;
+static inline const GstStructure* lftag_meta_get_structure(GstBuffer* buffer, const gchar* meta_name) {
+  GstCustomMeta* meta = gst_buffer_get_custom_meta(buffer, meta_name);
+  return meta ? gst_custom_meta_get_structure(meta) : NULL;
 }
 
 /* Point @index of a list-of-points field (or index 0 of a single point field,
  * such as "center", when @index is -1). FALSE when there is no such point. */
-static inline gboolean
-lftag_structure_get_point (const GstStructure * s, const gchar * field,
-    gint index, gdouble * x, gdouble * y)
-{
-  const GValue *v = gst_structure_get_value (s, field);
-  if (v == NULL || !GST_VALUE_HOLDS_ARRAY (v))
-    return FALSE;
+static inline gboolean lftag_structure_get_point(const GstStructure* s, const gchar* field, gint index, gdouble* x,
+                                                 gdouble* y) {
+  const GValue* v = gst_structure_get_value(s, field);
+  if (v == NULL || !GST_VALUE_HOLDS_ARRAY(v)) return FALSE;
   if (index >= 0) {
-    if ((guint) index >= gst_value_array_get_size (v))
-      return FALSE;
-    v = gst_value_array_get_value (v, index);
-    if (!GST_VALUE_HOLDS_ARRAY (v))
-      return FALSE;
+    if ((guint)index >= gst_value_array_get_size(v)) return FALSE;
+    v = gst_value_array_get_value(v, index);
+    if (!GST_VALUE_HOLDS_ARRAY(v)) return FALSE;
   }
-  if (gst_value_array_get_size (v) != 2
-      || !G_VALUE_HOLDS_DOUBLE (gst_value_array_get_value (v, 0))
-      || !G_VALUE_HOLDS_DOUBLE (gst_value_array_get_value (v, 1)))
+  if (gst_value_array_get_size(v) != 2 || !G_VALUE_HOLDS_DOUBLE(gst_value_array_get_value(v, 0)) ||
+      !G_VALUE_HOLDS_DOUBLE(gst_value_array_get_value(v, 1)))
     return FALSE;
-  *x = g_value_get_double (gst_value_array_get_value (v, 0));
-  *y = g_value_get_double (gst_value_array_get_value (v, 1));
+  *x = g_value_get_double(gst_value_array_get_value(v, 0));
+  *y = g_value_get_double(gst_value_array_get_value(v, 1));
   return TRUE;
 }
 

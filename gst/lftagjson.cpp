@@ -26,8 +26,7 @@ std::optional<nlohmann::ordered_json> buffer_json(GstBuffer* buffer, const GstSe
   out["time"] = GST_CLOCK_TIME_IS_VALID(pts) ? nlohmann::ordered_json(double(pts) / GST_SECOND) : nullptr;
   out["dts"] = time_json(GST_BUFFER_DTS(buffer));
   out["duration"] = time_json(GST_BUFFER_DURATION(buffer));
-  out["running_time"] =
-      in_time ? time_json(gst_segment_to_running_time(&segment, GST_FORMAT_TIME, pts)) : nullptr;
+  out["running_time"] = in_time ? time_json(gst_segment_to_running_time(&segment, GST_FORMAT_TIME, pts)) : nullptr;
   out["stream_time"] = in_time ? time_json(gst_segment_to_stream_time(&segment, GST_FORMAT_TIME, pts)) : nullptr;
   out["width"] = found->width;
   out["height"] = found->height;

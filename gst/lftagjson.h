@@ -17,7 +17,6 @@ namespace lftag::gst {
 // seconds), "dts", "duration", "running_time", "stream_time" (nanoseconds, null when
 // unknown; the last two from `segment`, when it is in time), "width", "height" (the
 // analysed frame) and "detections". Throws std::invalid_argument on a malformed meta.
-std::optional<nlohmann::ordered_json> buffer_json(GstBuffer* buffer, const GstSegment& segment,
-                                                  guint64 frame);
+std::optional<nlohmann::ordered_json> buffer_json(GstBuffer* buffer, const GstSegment& segment, guint64 frame);
 
 }  // namespace lftag::gst

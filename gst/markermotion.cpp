@@ -38,16 +38,14 @@ std::uint64_t splitmix64(std::uint64_t x) {
 
 }  // namespace
 
-std::uint64_t mix_seed(std::uint64_t seed, std::uint64_t stream) {
-  return splitmix64(seed ^ splitmix64(stream));
-}
+std::uint64_t mix_seed(std::uint64_t seed, std::uint64_t stream) { return splitmix64(seed ^ splitmix64(stream)); }
 
 double MarkerMotion::Wave::operator()(double t) const {
   return (std::sin(kTwoPi * f1 * t + p1) + 0.5 * std::sin(kTwoPi * f2 * t + p2)) / 1.5;
 }
 
-MarkerMotion::MarkerMotion(const Camera& camera, const Family& family, const std::vector<TagId>& ids,
-                           double tag_size, std::uint64_t seed)
+MarkerMotion::MarkerMotion(const Camera& camera, const Family& family, const std::vector<TagId>& ids, double tag_size,
+                           std::uint64_t seed)
     : camera_(camera), family_(family), tag_size_(tag_size) {
   if (camera.width <= 0 || camera.height <= 0) throw std::invalid_argument("the camera needs a frame size");
   if (!(tag_size > 0)) throw std::invalid_argument("the tag size must be positive");

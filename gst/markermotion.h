@@ -40,7 +40,7 @@ class MarkerMotion {
     double u0, v0, half_u, half_v;  // the cell, normalised image coordinates
     double z_near;                  // metres: the marker's diagonal fills most of the cell
     Wave u, v, depth, tilt_x, tilt_y, wobble;
-    double roll0, roll_rate;        // radians, radians per second
+    double roll0, roll_rate;  // radians, radians per second
   };
 
   SceneMarker marker_at(const Path& path, double t) const;

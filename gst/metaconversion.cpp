@@ -107,8 +107,7 @@ std::vector<double> doubles_of(const GValue* v) {
 
 std::vector<double> get_doubles(const GstStructure* s, const char* field, std::size_t count) {
   std::vector<double> d = doubles_of(value_of(s, field));
-  if (d.size() != count)
-    malformed(s, field, ("is not an array of " + std::to_string(count) + " doubles").c_str());
+  if (d.size() != count) malformed(s, field, ("is not an array of " + std::to_string(count) + " doubles").c_str());
   return d;
 }
 
@@ -229,11 +228,10 @@ GstStructure* detection_structure(const Detection& d) {
   set_point(s, LFTAG_FIELD_CENTER, d.center);
   set_vec3(s, LFTAG_FIELD_RVEC, d.rvec);
   set_vec3(s, LFTAG_FIELD_TVEC, d.tvec);
-  gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, d.tag_size,
-                    LFTAG_FIELD_CALIBRATED, G_TYPE_BOOLEAN, gboolean(d.calibrated),
-                    LFTAG_FIELD_DECODE_ERROR, G_TYPE_DOUBLE, d.decode_error,
-                    LFTAG_FIELD_WORST_CELL, G_TYPE_DOUBLE, d.worst_cell,
-                    LFTAG_FIELD_EDGE_SCORE, G_TYPE_DOUBLE, d.edge_score,
+  gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, d.tag_size, LFTAG_FIELD_CALIBRATED, G_TYPE_BOOLEAN,
+                    gboolean(d.calibrated), LFTAG_FIELD_DECODE_ERROR, G_TYPE_DOUBLE, d.decode_error,
+                    LFTAG_FIELD_WORST_CELL, G_TYPE_DOUBLE, d.worst_cell, LFTAG_FIELD_EDGE_SCORE, G_TYPE_DOUBLE,
+                    d.edge_score, LFTAG_FIELD_FROM_OUTLINE, G_TYPE_BOOLEAN, gboolean(d.from_outline),
                     LFTAG_FIELD_REPROJECTION_ERROR, G_TYPE_DOUBLE, d.reprojection_error, nullptr);
   return s;
 }
@@ -248,9 +246,8 @@ GstStructure* truth_structure(const MarkerTruth& t) {
   set_vec3(s, LFTAG_FIELD_RVEC, t.rvec);
   set_vec3(s, LFTAG_FIELD_TVEC, t.tvec);
   set_points(s, LFTAG_FIELD_CENTERS, t.centers);
-  gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, t.tag_size,
-                    LFTAG_FIELD_FULLY_VISIBLE, G_TYPE_BOOLEAN, gboolean(t.fully_visible),
-                    LFTAG_FIELD_EDGE_PX, G_TYPE_DOUBLE, t.edge_px, nullptr);
+  gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, t.tag_size, LFTAG_FIELD_FULLY_VISIBLE, G_TYPE_BOOLEAN,
+                    gboolean(t.fully_visible), LFTAG_FIELD_EDGE_PX, G_TYPE_DOUBLE, t.edge_px, nullptr);
   return s;
 }
 
@@ -273,9 +270,9 @@ void add_truth_meta(GstBuffer* buffer, const Camera& camera, const std::vector<M
   truth_meta_info();
   GstStructure* s = gst_custom_meta_get_structure(gst_buffer_add_custom_meta(buffer, LFTAG_TRUTH_META_NAME));
   gst_structure_set(s, LFTAG_META_FIELD_WIDTH, G_TYPE_INT, camera.width, LFTAG_META_FIELD_HEIGHT, G_TYPE_INT,
-                    camera.height, LFTAG_META_FIELD_FX, G_TYPE_DOUBLE, camera.fx, LFTAG_META_FIELD_FY,
-                    G_TYPE_DOUBLE, camera.fy, LFTAG_META_FIELD_CX, G_TYPE_DOUBLE, camera.cx, LFTAG_META_FIELD_CY,
-                    G_TYPE_DOUBLE, camera.cy, nullptr);
+                    camera.height, LFTAG_META_FIELD_FX, G_TYPE_DOUBLE, camera.fx, LFTAG_META_FIELD_FY, G_TYPE_DOUBLE,
+                    camera.fy, LFTAG_META_FIELD_CX, G_TYPE_DOUBLE, camera.cx, LFTAG_META_FIELD_CY, G_TYPE_DOUBLE,
+                    camera.cy, nullptr);
   set_doubles(s, LFTAG_META_FIELD_DISTORTION, camera.distortion);
   std::vector<GstStructure*> items;
   for (const MarkerTruth& t : markers) items.push_back(truth_structure(t));
@@ -298,6 +295,8 @@ Detection detection_from_structure(const GstStructure* s) {
   // Optional: structures from before it was added read as 0.
   if (!gst_structure_get_double(s, LFTAG_FIELD_WORST_CELL, &d.worst_cell)) d.worst_cell = 0;
   d.edge_score = get_double(s, LFTAG_FIELD_EDGE_SCORE);
+  gboolean from_outline = FALSE;  // optional, as worst-cell
+  if (gst_structure_get_boolean(s, LFTAG_FIELD_FROM_OUTLINE, &from_outline)) d.from_outline = from_outline;
   d.reprojection_error = get_double(s, LFTAG_FIELD_REPROJECTION_ERROR);
   return d;
 }
@@ -330,8 +329,8 @@ std::optional<FrameDetections> read_detection_meta(GstBuffer* buffer) {
       !gst_structure_get_boolean(s, LFTAG_META_FIELD_ANALYSED, &analysed))
     malformed(s, LFTAG_META_FIELD_ANALYSED, "is not a boolean");
   frame.analysed = analysed;
-  frame.detections = read_list(s, LFTAG_META_FIELD_DETECTIONS, LFTAG_DETECTION_STRUCTURE_NAME,
-                               detection_from_structure);
+  frame.detections =
+      read_list(s, LFTAG_META_FIELD_DETECTIONS, LFTAG_DETECTION_STRUCTURE_NAME, detection_from_structure);
   return frame;
 }
 

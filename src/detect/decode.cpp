@@ -80,19 +80,6 @@ cv::Matx22d units_to_pixels(const cv::Matx33d& h, cv::Point2d u) {
 // The local inverse of h at unit point u: pixels -> units.
 cv::Matx22d pixels_to_units(const cv::Matx33d& h, cv::Point2d u) { return units_to_pixels(h, u).inv(); }
 
-// Pixels per unit along the marker's most foreshortened direction at unit point u: the
-// smaller singular value of h's Jacobian there.
-double smallest_scale(const cv::Matx33d& h, cv::Point2d u) {
-  // The singular values of a 2x2 matrix in closed form: their squares sum to the squared
-  // entries and their product is the determinant.
-  const cv::Matx22d j = units_to_pixels(h, u);
-  const double squares = j(0, 0) * j(0, 0) + j(0, 1) * j(0, 1) + j(1, 0) * j(1, 0) + j(1, 1) * j(1, 1);
-  const double det = std::abs(j(0, 0) * j(1, 1) - j(0, 1) * j(1, 0));
-  const double largest = std::sqrt((squares + std::sqrt(std::max(0.0, squares * squares - 4 * det * det))) / 2);
-  const double smallest = largest > 0 ? det / largest : 0.0;
-  return std::isfinite(smallest) ? smallest : 0.0;
-}
-
 // The homography taking the unit square's corners (0, 0), (1, 0), (1, 1), (0, 1) to q[0]
 // .. q[3] (the projective map of a square onto a quadrilateral, in closed form); none when
 // three of the corners are collinear.
@@ -241,6 +228,18 @@ double square_ink_spread(const Candidate& c, const Decoding& d) {
 }
 
 }  // namespace
+
+double smallest_scale(const cv::Matx33d& h, cv::Point2d u) {
+  // The singular values of a 2x2 matrix in closed form: their squares sum to the squared
+  // entries and their product is the determinant.
+  const cv::Matx22d j = units_to_pixels(h, u);
+  const double squares = j(0, 0) * j(0, 0) + j(0, 1) * j(0, 1) + j(1, 0) * j(1, 0) + j(1, 1) * j(1, 1);
+  const double det = std::abs(j(0, 0) * j(1, 1) - j(0, 1) * j(1, 0));
+  const double largest = std::sqrt((squares + std::sqrt(std::max(0.0, squares * squares - 4 * det * det))) / 2);
+  const double smallest = largest > 0 ? det / largest : 0.0;
+  return std::isfinite(smallest) ? smallest : 0.0;
+}
+
 
 double edge_gradient(const ImageView& image, const Camera& camera, const cv::Matx33d& h, double a, double b) {
   // About one sample per pixel of projected edge, at least 8 and at most 16 per side: the

@@ -6,6 +6,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "../core/geometry.hpp"
 #include "stages.hpp"
 
 namespace lftag {
@@ -60,7 +61,7 @@ void DetectorParams::validate() const {
   for (double t : max_decode_error)
     if (!(t >= 0) || !std::isfinite(t)) fail("decode error thresholds (tau3) must be finite and not negative");
   if (!(tag_size > 0) || !std::isfinite(tag_size)) fail("the tag size must be positive");
-  if (camera.fx != 0 || camera.fy != 0) camera.validate();
+  if (camera) camera->validate();
 }
 
 double DetectionStats::total_ms() const {
@@ -72,6 +73,7 @@ DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   frames += o.frames, regions += o.regions, topology += o.topology, area += o.area, geometry += o.geometry;
   angle += o.angle, collinearity += o.collinearity, residual += o.residual, unambiguous += o.unambiguous;
   decoded += o.decoded, second_looks += o.second_looks, second_look_found += o.second_look_found;
+  outline_reads += o.outline_reads, outline_found += o.outline_found;
   skipped_by_budget += o.skipped_by_budget, second_looks_skipped += o.second_looks_skipped;
   second_look_ms += o.second_look_ms;
   threshold_ms += o.threshold_ms, regions_ms += o.regions_ms, candidates_ms += o.candidates_ms;
@@ -190,6 +192,52 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
   }
 }
 
+// The marker in a second look's patch whose squares its binary image could not separate:
+// its outline aligned and its cells read from the grey levels (outline.cpp), then posed
+// from the squares' centres under the aligned outline like any other detection.
+void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& frame, const ImageView& work,
+                   const Camera& camera, const DetectorParams& p, DetectionStats& stats, std::vector<Detection>& found) {
+  for (const std::array<cv::Point2d, 4>& outline : detail::coarse_outlines(binary, frame))
+    for (const Family& f : p.families) {
+      ++stats.outline_reads;
+      const std::optional<detail::OutlineReading> reading = detail::read_outline(work, outline, f);
+      if (!reading || !detail::acceptable(*reading, p)) continue;
+      // Blobs at the centroids of the squares under the homography, which is what the
+      // pose's perspective correction expects of a blob.
+      detail::Candidate c;
+      c.family = f;
+      detail::Decoding d;
+      d.id = reading->id;
+      d.homography = reading->homography;
+      std::vector<cv::Point2d> observed;
+      for (int g = 0; g < f.cell_count(); ++g) {
+        const UnitRect s = f.square(g, f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g)));
+        std::vector<cv::Point2d> square = {{s.x, s.y}, {s.x + s.width, s.y}, {s.x + s.width, s.y + s.height},
+                                           {s.x, s.y + s.height}};
+        cv::perspectiveTransform(square, square, reading->homography);
+        observed.push_back(detail::polygon_centroid(square));
+        d.blob_of_cell.push_back(g);
+      }
+      const std::vector<cv::Point2d> ideal = camera.undistort(observed);
+      for (int g = 0; g < f.cell_count(); ++g) {
+        detail::Blob b;
+        b.centroid = observed[g], b.point = ideal[g];
+        c.blobs.push_back(b);
+      }
+      Detection det;
+      det.family = f;
+      det.id = d.id;
+      det.centroids = observed;
+      det.from_outline = true;
+      const std::array<int, 4> keypoint_cells = f.keypoint_cells();
+      for (int i = 0; i < 4; ++i) det.keypoints[i] = observed[keypoint_cells[i]];
+      if (!detail::estimate_pose(c, d, camera, p, det) || already_found(found, det.center)) continue;
+      ++stats.decoded, ++stats.second_look_found, ++stats.outline_found;
+      found.push_back(std::move(det));
+      return;  // one marker to a patch
+    }
+}
+
 }  // namespace
 
 const char* stage_name(Stage stage) {
@@ -226,7 +274,7 @@ struct Detector::Impl {
 
   const Camera& camera_for(int w, int h) {
     if (camera_size != cv::Size(w, h)) {
-      camera = params.camera.fx > 0 ? params.camera.for_frame(w, h) : Camera::default_for(w, h);
+      camera = params.camera ? params.camera->for_frame(w, h) : Camera::default_for(w, h);
       camera_size = cv::Size(w, h);
     }
     return camera;
@@ -316,7 +364,13 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       stats.second_look_ms += elapsed_ms(start);
       if (trace) trace->second_looks.push_back(box);
       record_rejected(true);
+      const std::size_t before = found.size();
       decode_candidates(s.candidates, work, camera, p, true, stats, trace, found);
+      if (found.size() == before) {
+        start = Clock::now();
+        read_outlines(s.patch_binary, s.patch.frame, work, camera, p, stats, found);
+        stats.second_look_ms += elapsed_ms(start);
+      }
     }
   }
 

@@ -20,6 +20,8 @@
 //   final pose (IPPE)         refine_pose, tag_size, camera     estimate_pose (pose.cpp)
 //   (not in the paper)        second_look, max_second_looks     near_candidates, enlarge_patch,
 //                                                               binarise_patch (second_look.cpp)
+//   (not in the paper)        second_look, min_pixels_per_unit  coarse_outlines, read_outline,
+//                                                               acceptable (outline.cpp)
 //   (not in the paper)        max_candidates (the budget)       find_candidates (candidates.cpp)
 #pragma once
 
@@ -189,6 +191,37 @@ bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look,
 // local brightest level, where those differ by a printed contrast; white elsewhere.
 void binarise_patch(const Patch& patch, double level, BinaryImage& out);
 
+// ---------------------------------------------------------------- outline.cpp
+// The quadrilateral outlines of the largest groups of black pieces of a patch's binary
+// image that lie in one white region clear of the patch's edge (at most three, the
+// largest first), in frame pixels, clockwise on screen.
+std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binary, const PatchFrame& frame);
+
+// A marker read from the grey levels under its aligned outline.
+struct OutlineReading {
+  TagId id;
+  cv::Matx33d homography;        // units -> frame pixels (as observed), in the marker's true turn
+  double correlation = 0;        // of the marker's fixed structure with the image (ECC)
+  double marker_correlation = 0; // of the whole marker read, aligned again (ECC)
+  double contrast = 0;           // the white ring's grey level minus the cells' cores'
+  double margin = 0;             // least, over the data cells, of how much worse the runner-up
+                                 // square position fits than the best: mean squared grey
+                                 // difference per sample over the contrast squared
+  double baseline_gap = 0;       // how much more the two baseline corners look like baselines
+                                 // than the other two (0..1 of the contrast)
+  double pixels_per_unit = 0;    // along the most foreshortened direction, at the centre
+};
+
+// Aligns the fixed structure of `family` to the image from `outline` (its outer corners,
+// clockwise on screen, from any of them) and reads the id; none when the alignment fails.
+std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& outline,
+                                           const Family& family);
+
+// The checks an outline reading must pass to be a detection, each scale-free.
+constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it
+constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContrast = 16, kMinMargin = 0.03, kMinBaselineGap = 0.25;
+bool acceptable(const OutlineReading& reading, const DetectorParams& params);
+
 // ---------------------------------------------------------------- keypoints.cpp
 // Blob indices of K0..K3 after the geometry, angle and collinearity constraints.
 struct KeyPoints {
@@ -244,6 +277,10 @@ double edge_gradient(const ImageView& image, const Camera& camera, const cv::Mat
 
 // Least-squares homography (h33 = 1) taking `from` to `to`; none when degenerate.
 std::optional<cv::Matx33d> fit_homography(const std::vector<cv::Point2d>& from, const std::vector<cv::Point2d>& to);
+
+// Pixels per unit along the marker's most foreshortened direction at unit point u: the
+// smaller singular value of h's Jacobian there (0 when not finite).
+double smallest_scale(const cv::Matx33d& h, cv::Point2d u);
 
 // Undistorted pixels -> distorted pixels of `camera`, in place.
 void distort(const Camera& camera, std::vector<cv::Point2d>& points);

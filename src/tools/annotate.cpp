@@ -321,7 +321,7 @@ void Annotator::build() {
   gst_element_link_many(queue, convert, detect, nullptr);
 
   // The detector, as `lftag detect` would be set up.
-  const bool camera = !o_.calibration.empty() || !std::isnan(o_.fx);
+  const bool camera = !o_.calibration.empty() || o_.fx.has_value();
   std::string overlay = o_.overlay.empty() ? (camera ? "outline+id+axes" : "outline+id") : overlay_flags(o_.overlay);
   if (o_.output.empty()) overlay.clear();  // nothing is drawn that nobody sees
   set(detect, "families", o_.families);
@@ -331,9 +331,11 @@ void Annotator::build() {
   set(detect, "threshold-offset", std::to_string(o_.offset));
   set(detect, "max-candidates", std::to_string(o_.max_candidates));
   if (!o_.calibration.empty()) g_object_set(detect, "calibration-file", o_.calibration.c_str(), nullptr);
-  if (!std::isnan(o_.fx)) g_object_set(detect, "fx", o_.fx, "fy", std::isnan(o_.fy) ? o_.fx : o_.fy, nullptr);
-  if (!std::isnan(o_.cx)) g_object_set(detect, "cx", o_.cx, nullptr);
-  if (!std::isnan(o_.cy)) g_object_set(detect, "cy", o_.cy, nullptr);
+  // Only the options given: the element's own "not set" (0 for fx and fy, -1 for cx and
+  // cy) never stands for a value.
+  if (o_.fx) g_object_set(detect, "fx", *o_.fx, "fy", o_.fy.value_or(*o_.fx), nullptr);
+  if (o_.cx) g_object_set(detect, "cx", *o_.cx, nullptr);
+  if (o_.cy) g_object_set(detect, "cy", *o_.cy, nullptr);
   if (tag_size_given_) g_object_set(detect, "tag-size", o_.tag_size, nullptr);
 
   GstPad* pad = gst_element_get_static_pad(detect, "src");
@@ -689,13 +691,13 @@ void add_annotate_command(CLI::App& app, int& status) {
       Family::parse_list(o.families);
       if (!o.overlay.empty()) overlay_flags(o.overlay);
       if (!o.calibration.empty()) Camera::load(o.calibration);
-      if (std::isnan(o.fx) && (!std::isnan(o.fy) || !std::isnan(o.cx) || !std::isnan(o.cy)))
-        throw std::invalid_argument("--fy, --cx and --cy need --fx");
+      check_camera_options(o);
       // lftagdetect's ranges, narrower than the still-image tool's.
-      for (const auto& [name, value, lo, hi] : {std::tuple{"--fx", o.fx, 1e-3, 1e6}, std::tuple{"--fy", o.fy, 1e-3, 1e6},
-                                                  std::tuple{"--cx", o.cx, 0.0, 1e6}, std::tuple{"--cy", o.cy, 0.0, 1e6},
-                                                  std::tuple{"--tag-size", o.tag_size, 1e-3, 100.0}})
-        if (!std::isnan(value) && (value < lo || value > hi))
+      using Range = std::tuple<const char*, std::optional<double>, double, double>;
+      for (const auto& [name, value, lo, hi] : {Range{"--fx", o.fx, 1e-3, 1e6}, Range{"--fy", o.fy, 1e-3, 1e6},
+                                                  Range{"--cx", o.cx, 0.0, 1e6}, Range{"--cy", o.cy, 0.0, 1e6},
+                                                  Range{"--tag-size", o.tag_size, 1e-3, 100.0}})
+        if (value && (*value < lo || *value > hi))
           throw std::invalid_argument(std::string(name) + " must be from " + CLI::detail::to_string(lo) + " to " +
                                       CLI::detail::to_string(hi) + " for video");
       if (!o.output.empty() && !o.jsonl.empty() && fs::absolute(o.output) == fs::absolute(o.jsonl))

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cmath>
+#include <optional>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -25,10 +26,12 @@ inline CLI::Validator finite_in(double lo, double hi) {
       "NUMBER in [" + CLI::detail::to_string(lo) + ", " + CLI::detail::to_string(hi) + "]");
 }
 
-// The detector's options, the same in `lftag detect` and `lftag annotate`.
+// The detector's options, the same in `lftag detect` and `lftag annotate`. A camera
+// option not given is empty (never a number standing for "not given": --cx 0 is 0).
 struct DetectorOptions {
   std::string families = "3x3,4x4", calibration;
-  double fx = NAN, fy = NAN, cx = NAN, cy = NAN, tag_size = 0.1;
+  std::optional<double> fx, fy, cx, cy;
+  double tag_size = 0.1;
   int window = 16, offset = 4;
   int max_candidates = DetectorParams{}.max_candidates;
 };
@@ -36,6 +39,11 @@ struct DetectorOptions {
 // --threshold-offset and --max-candidates to `cmd`, stored in `options` (which must outlive
 // the parse).
 void add_detector_options(CLI::App* cmd, DetectorOptions& options);
+// Throws std::invalid_argument when --fy, --cx or --cy is given without --fx.
+void check_camera_options(const DetectorOptions& options);
+// The camera --fx, --fy, --cx and --cy give for a width x height image (fy defaults to fx,
+// the principal point to the image centre); empty without --fx.
+std::optional<Camera> hand_camera(const DetectorOptions& options, int width, int height);
 
 void add_generate_command(CLI::App& app, int& status);
 void add_render_command(CLI::App& app, int& status);

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <optional>
 #include <stdexcept>
 
 #include <opencv2/imgcodecs.hpp>
@@ -22,7 +23,8 @@ nlohmann::json stats_json(const DetectionStats& s) {
            {{"regions", s.regions}, {"topology", s.topology}, {"area", s.area}, {"geometry", s.geometry},
             {"angle", s.angle}, {"collinearity", s.collinearity}, {"residual", s.residual},
             {"unambiguous", s.unambiguous}, {"decoded", s.decoded}, {"second_looks", s.second_looks},
-            {"second_look_found", s.second_look_found}, {"skipped_by_budget", s.skipped_by_budget},
+            {"second_look_found", s.second_look_found},
+            {"outline_reads", s.outline_reads}, {"outline_found", s.outline_found}, {"skipped_by_budget", s.skipped_by_budget},
             {"second_looks_skipped", s.second_looks_skipped}}},
           {"time_ms",
            {{"threshold", s.threshold_ms}, {"regions", s.regions_ms}, {"candidates", s.candidates_ms},
@@ -73,6 +75,16 @@ void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
       ->check(CLI::Range(0, 1 << 30));
 }
 
+void check_camera_options(const DetectorOptions& o) {
+  if (!o.fx && (o.fy || o.cx || o.cy)) throw std::invalid_argument("--fy, --cx and --cy need --fx");
+}
+
+std::optional<Camera> hand_camera(const DetectorOptions& o, int width, int height) {
+  if (!o.fx) return std::nullopt;
+  return Camera::pinhole(*o.fx, o.fy.value_or(*o.fx), o.cx.value_or((width - 1) / 2.0),
+                         o.cy.value_or((height - 1) / 2.0));
+}
+
 void add_detect_command(CLI::App& app, int& status) {
   struct Options : DetectorOptions {
     std::vector<std::string> images;
@@ -100,15 +112,10 @@ void add_detect_command(CLI::App& app, int& status) {
       base.threshold_window = opt->window;
       base.threshold_offset = opt->offset;
       base.max_candidates = opt->max_candidates;
-      if (!opt->calibration.empty()) {
-        base.camera = Camera::load(opt->calibration);
-      } else if (!std::isnan(opt->fx)) {
-        base.camera = Camera::pinhole(opt->fx, std::isnan(opt->fy) ? opt->fx : opt->fy, opt->cx, opt->cy);
-      } else if (!std::isnan(opt->fy) || !std::isnan(opt->cx) || !std::isnan(opt->cy)) {
-        throw std::invalid_argument("--fy, --cx and --cy need --fx");
-      }
+      check_camera_options(*opt);
+      if (!opt->calibration.empty()) base.camera = Camera::load(opt->calibration);
       if (!opt->debug_dir.empty()) std::filesystem::create_directories(opt->debug_dir);
-      if (base.camera.fx > 0 && !std::isnan(base.camera.cx)) base.validate();
+      base.validate();  // the hand-set camera's numbers passed the options' checks
     } catch (const std::exception& e) {
       std::cerr << "lftag detect: " << e.what() << "\n";
       status = 2;
@@ -128,8 +135,7 @@ void add_detect_command(CLI::App& app, int& status) {
         auto it = detectors.find({grey.cols, grey.rows});
         if (it == detectors.end()) {
           DetectorParams p = base;
-          if (p.camera.fx > 0 && std::isnan(p.camera.cx)) p.camera.cx = (grey.cols - 1) / 2.0;
-          if (p.camera.fx > 0 && std::isnan(p.camera.cy)) p.camera.cy = (grey.rows - 1) / 2.0;
+          if (!p.camera) p.camera = hand_camera(*opt, grey.cols, grey.rows);
           it = detectors.emplace(std::make_pair(grey.cols, grey.rows), Detector(p)).first;
         }
         DetectionStats stats;
@@ -147,9 +153,9 @@ void add_detect_command(CLI::App& app, int& status) {
         }
         total += stats;
         if (!opt->debug_dir.empty()) {
-          const Camera camera = it->second.params().camera.fx > 0
-                                    ? it->second.params().camera.for_frame(grey.cols, grey.rows)
-                                    : Camera::default_for(grey.cols, grey.rows);
+          const std::optional<Camera>& given = it->second.params().camera;
+          const Camera camera =
+              given ? given->for_frame(grey.cols, grey.rows) : Camera::default_for(grey.cols, grey.rows);
           const std::string stem = std::filesystem::path(path).stem().string();
           for (const auto& [stage, image] : draw_trace(grey, trace, camera)) {
             const std::string file = (std::filesystem::path(opt->debug_dir) / (stem + "-" + stage + ".png")).string();

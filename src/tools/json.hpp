@@ -42,7 +42,8 @@ inline nlohmann::json detection_json(const Detection& d) {
           {"decode_error", d.decode_error},
           {"worst_cell", d.worst_cell},
           {"edge_score", d.edge_score},
-          {"reprojection_error", d.reprojection_error}};
+          {"reprojection_error", d.reprojection_error},
+          {"from_outline", d.from_outline}};
 }
 
 }  // namespace lftag::tools

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <stdexcept>
 
 #include <opencv2/calib3d.hpp>
@@ -60,7 +61,8 @@ nlohmann::json truth_json(const MarkerTruth& t) {
 void add_render_command(CLI::App& app, int& status) {
   struct Options {
     int width = 640, height = 480;
-    double fx = 320, fy = 320, cx = NAN, cy = NAN;
+    double fx = 320, fy = 320;
+    std::optional<double> cx, cy;  // empty: the frame centre
     std::vector<double> distortion;
     std::string calibration, family = "3x3", id = "0", scene, photo, output, truth;
     double tag_size = 1.0, distance = 5.0, x = 0, y = 0, roll = 0, tilt = 0, pan = 0;
@@ -116,8 +118,8 @@ void add_render_command(CLI::App& app, int& status) {
       if (!opt->calibration.empty()) {
         p.camera = Camera::load(opt->calibration).for_frame(opt->width, opt->height);
       } else {
-        p.camera = Camera::pinhole(opt->fx, opt->fy, std::isnan(opt->cx) ? (opt->width - 1) / 2.0 : opt->cx,
-                                   std::isnan(opt->cy) ? (opt->height - 1) / 2.0 : opt->cy, opt->width, opt->height);
+        p.camera = Camera::pinhole(opt->fx, opt->fy, opt->cx.value_or((opt->width - 1) / 2.0),
+                                   opt->cy.value_or((opt->height - 1) / 2.0), opt->width, opt->height);
         p.camera.distortion = opt->distortion;
         if (!opt->distortion.empty() && opt->distortion.size() != 4 && opt->distortion.size() != 5)
           throw std::invalid_argument("--distortion takes 4 or 5 coefficients: k1,k2,p1,p2[,k3]");

@@ -189,6 +189,24 @@ def options_reach_the_detector():
 
 
 @case
+def principal_point_zero_is_zero():
+    # --cx 0 --cy 0 is the top-left pixel, not "not given" (the frame centre): the pose
+    # projects each marker's centre through the principal point given.
+    def poses(*camera):
+        result = annotate(recording(), "--jsonl", "-", "--fx", "640", *camera, "-q")
+        return [(d["center"], d["pose"]["tvec"]) for line in result.stdout.splitlines()
+                for d in json.loads(line)["detections"]]
+
+    for camera, (cx, cy) in (((), (319.5, 239.5)), (("--cx", "0", "--cy", "0"), (0, 0)),
+                             (("--cx", "0"), (0, 239.5))):
+        found = poses(*camera)
+        assert found, camera
+        for center, t in found:
+            projected = (640 * t[0] / t[2] + cx, 640 * t[1] / t[2] + cy)
+            assert math.dist(projected, center) < 2, (camera, center, projected)
+
+
+@case
 def progress_on_a_terminal():
     remove("tty.webm")
     master, slave = pty.openpty()

@@ -1203,6 +1203,76 @@ GST_START_TEST(test_uncalibrated_warning) {
 }
 GST_END_TEST;
 
+// "Not set" is a value no camera has (fx, fy 0; cx, cy -1), so a principal point of 0
+// is 0, never the frame centre: the poses put the markers right of and below it. A
+// principal point without fx is ignored with a warning that says so.
+GST_START_TEST(test_camera_not_set) {
+  GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
+  double fx = -2, fy = -2, cx = -2, cy = -2;
+  g_object_get(e, "fx", &fx, "fy", &fy, "cx", &cx, "cy", &cy, nullptr);
+  fail_unless(fx == 0 && fy == 0 && cx == -1 && cy == -1, "defaults %g %g %g %g", fx, fy, cx, cy);
+  g_object_set(e, "cx", 0.0, "cy", 0.0, nullptr);
+  g_object_get(e, "cx", &cx, "cy", &cy, nullptr);
+  fail_unless(cx == 0 && cy == 0);
+  g_object_set(e, "cy", -0.5, nullptr);  // refused (test_bad_families): 0 stays
+  g_object_get(e, "cy", &cy, nullptr);
+  fail_unless(cy == 0);
+  g_object_set(e, "cx", -1.0, "fx", 0.0, nullptr);  // not set again
+  g_object_get(e, "cx", &cx, "fx", &fx, nullptr);
+  fail_unless(cx == -1 && fx == 0);
+  ASSERT_WARNING(g_object_set(e, "cx", -2.0, nullptr));
+  gst_object_unref(e);
+
+  struct Case {
+    const char* properties;
+    double cx, cy;
+  };
+  for (const Case& c : {Case{"", 319.5, 239.5}, Case{"cx=0 cy=0", 0, 0}, Case{"cx=0", 0, 239.5},
+                        Case{"cy=0 cx=12.5", 12.5, 0}}) {
+    Frames frames;
+    pull_frames(frames,
+                std::string("lftagtestsrc num-buffers=2 count=2 seed=4 ! video/x-raw,width=640,height=480 ! "
+                            "lftagdetect fx=640 ") +
+                    c.properties,
+                nullptr, 2);
+    int checked = 0;
+    for (GstBuffer* buffer : frames.buffers)
+      for (const Detection& d : detections_of(buffer).detections) {
+        fail_unless(d.calibrated);
+        const cv::Point2d through(640 * d.tvec[0] / d.tvec[2] + c.cx, 640 * d.tvec[1] / d.tvec[2] + c.cy);
+        fail_unless(cv::norm(through - d.center) < 0.5, "%s: centre (%g, %g), through the principal point (%g, %g)",
+                    c.properties, d.center.x, d.center.y, through.x, through.y);
+        ++checked;
+      }
+    fail_unless(checked >= 2, "%s: %d markers", c.properties, checked);
+  }
+
+  auto warnings = [](const std::string& properties) {
+    std::vector<GstMessage*> messages =
+        run_to_eos("lftagtestsrc num-buffers=3 ! lftagdetect " + properties + " ! fakesink", GST_MESSAGE_WARNING);
+    std::string text;
+    for (GstMessage* m : messages) {
+      GError* error = nullptr;
+      gst_message_parse_warning(m, &error, nullptr);
+      text += error->message;
+      g_error_free(error);
+    }
+    count_and_free(messages);
+    return text;
+  };
+  const std::string file = std::string(LFTAG_TEST_DATA) + "/opencv_sample.yml";
+  const std::pair<std::string, std::string> cases[] = {
+      {"cx=0", "Camera property cx is ignored without fx."},
+      {"fy=600 cy=0", "Camera properties fy, cy are ignored without fx."},
+      {"fx=600 cx=0 cy=0", ""},
+      {"fx=600 calibration-file=" + file, "Camera property fx is ignored: calibration-file gives the camera."}};
+  for (const auto& [properties, expected] : cases) {
+    const std::string posted = warnings(properties);
+    fail_unless(posted == expected, "%s: \"%s\"", properties.c_str(), posted.c_str());
+  }
+}
+GST_END_TEST;
+
 // The per-frame budget: a property with the library's default; the first frame it cuts
 // posts one warning for the stream, later cuts none; frames within it, none.
 GST_START_TEST(test_budget_warning) {
@@ -1377,7 +1447,8 @@ GST_END_TEST;
 GST_START_TEST(test_bad_families) {
   const std::pair<const char*, const char*> cases[] = {
       {"families", "9x9"}, {"families", "3x3,,4x4"}, {"families", "10x10"},
-      {"distortion", "0.1,x,0,0"}, {"distortion", "0.1,0.2,0.3"}, {"distortion", "nan,0,0,0"}};
+      {"distortion", "0.1,x,0,0"}, {"distortion", "0.1,0.2,0.3"}, {"distortion", "nan,0,0,0"},
+      {"cx", "-0.5"}, {"cy", "-0.001"}};
   for (const auto& [property, bad] : cases) {
     const std::string launch = std::string("lftagtestsrc num-buffers=3 ! lftagdetect name=d fx=500 ") + property +
                                "=\"" + bad + "\" ! fakesink";
@@ -1469,6 +1540,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_calibration);
   tcase_add_test(tc, test_calibration_change_while_playing);
   tcase_add_test(tc, test_uncalibrated_warning);
+  tcase_add_test(tc, test_camera_not_set);
   tcase_add_test(tc, test_budget_warning);
   tcase_add_test(tc, test_bad_frame_passes);
   tcase_add_test(tc, test_late_frames);

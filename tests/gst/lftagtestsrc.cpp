@@ -653,6 +653,52 @@ GST_START_TEST(test_camera_properties)
 }
 GST_END_TEST;
 
+// "Not set" is a value no camera has (fx, fy 0; cx, cy -1), so a principal point of 0
+// is 0, never the frame centre; between -1 and 0 is refused, naming the value.
+GST_START_TEST(test_camera_not_set)
+{
+  GstElement* src = gst_element_factory_make("lftagtestsrc", nullptr);
+  double fx = -2, fy = -2, cx = -2, cy = -2;
+  g_object_get(src, "fx", &fx, "fy", &fy, "cx", &cx, "cy", &cy, nullptr);
+  fail_unless(fx == 0 && fy == 0 && cx == -1 && cy == -1, "defaults %g %g %g %g", fx, fy, cx, cy);
+  g_object_set(src, "cx", 0.0, "cy", 0.0, nullptr);
+  g_object_get(src, "cx", &cx, "cy", &cy, nullptr);
+  fail_unless(cx == 0 && cy == 0);
+  g_object_set(src, "cx", -0.5, nullptr);  // refused: 0 stays
+  g_object_get(src, "cx", &cx, nullptr);
+  fail_unless(cx == 0);
+  g_object_set(src, "cx", -1.0, nullptr);  // not set again
+  g_object_get(src, "cx", &cx, nullptr);
+  fail_unless(cx == -1);
+  ASSERT_WARNING(g_object_set(src, "cy", -2.0, nullptr));
+  gst_object_unref(src);
+
+  Frames zero, x_only;
+  pull_frames(zero, "lftagtestsrc num-buffers=1 fx=500 cx=0 cy=0", "video/x-raw,width=320,height=240", 1);
+  const FrameTruth truth = truth_of(zero.buffers[0]);
+  fail_unless(truth.camera.cx == 0 && truth.camera.cy == 0, "cx %g cy %g", truth.camera.cx, truth.camera.cy);
+  pull_frames(x_only, "lftagtestsrc num-buffers=1 fx=500 cx=0", "video/x-raw,width=320,height=240", 1);
+  fail_unless(truth_of(x_only.buffers[0]).camera.cx == 0 && truth_of(x_only.buffers[0]).camera.cy == 119.5);
+
+  const GQuark resource = GST_RESOURCE_ERROR;
+  expect_error("lftagtestsrc fx=500 cx=-0.5 ! fakesink", "\"-0.5\"", resource);
+  expect_error("lftagtestsrc fx=500 cy=-0.25 ! fakesink", "cy", resource);
+
+  // Without fx the principal point counts for nothing: said, not silent.
+  GstElement* pipeline = gst_parse_launch("lftagtestsrc num-buffers=1 cx=0 ! fakesink", nullptr);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+  GstMessage* message = pop_message(pipeline, GST_MESSAGE_WARNING);
+  GError* error = nullptr;
+  gst_message_parse_warning(message, &error, nullptr);
+  fail_unless(std::string(error->message).find("cx") != std::string::npos, "%s", error->message);
+  fail_unless(std::string(error->message).find("without fx") != std::string::npos, "%s", error->message);
+  g_error_free(error);
+  gst_message_unref(message);
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(pipeline);
+}
+GST_END_TEST;
+
 // Waits (up to a generous limit, not a timing requirement) until `done` holds.
 template <class Done>
 static void wait_for(Done done, const char* what) {
@@ -742,6 +788,7 @@ static Suite* lftagtestsrc_suite(void) {
   tcase_add_test(tc, test_bad_settings_fail_the_start);
   tcase_add_test(tc, test_calibration_file);
   tcase_add_test(tc, test_camera_properties);
+  tcase_add_test(tc, test_camera_not_set);
   tcase_add_test(tc, test_changes_while_playing);
   return s;
 }

@@ -146,7 +146,7 @@ TEST(Budget, TheDefaultNeverCutsAnOrdinaryScene) {
   auto check = [&](const cv::Mat1b& image, const std::string& what) {
     // The default camera of the image's size.
     DetectorParams with = all_families(), without = all_families(0);
-    with.camera = without.camera = Camera();
+    with.camera = without.camera = std::nullopt;
     Detector detector(with), open(without);
     DetectionStats stats, open_stats;
     const std::vector<Detection> found = detector.detect(ImageView(image), &stats);

@@ -3,6 +3,8 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <tuple>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -265,6 +267,26 @@ TEST(Cli, DetectRejectsBadConfiguration) {
   r = run("detect --cx 100 x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("need --fx"), std::string::npos) << r.output;
+}
+
+TEST(Cli, CameraOptionsNotGivenAreEmptyAndZeroIsZero) {
+  // A marker at the image centre (the render's camera: fx 320, 640x480, centred).
+  const std::string image = kTmp + "/principal.png";
+  ASSERT_EQ(run("render --family 3x3 --id 77 --distance 3 --output " + image).status, 0);
+  // Without --cx and --cy the principal point is the centre; --cx 0 --cy 0 is the
+  // top-left pixel, so the pose puts the marker 319.5 px right and 239.5 px down of it.
+  for (const auto& [camera, cx, cy] : {std::tuple{"", 319.5, 239.5}, std::tuple{"--cx 0 --cy 0", 0.0, 0.0},
+                                       std::tuple{"--cy 0", 319.5, 0.0}}) {
+    const CliResult r = run(std::string("detect --family 3x3 --tag-size 1 --fx 320 ") + camera + " " + image);
+    ASSERT_EQ(r.status, 0) << r.output;
+    const auto lines = json_lines(r.output);
+    ASSERT_EQ(lines.size(), 1u) << r.output;
+    ASSERT_EQ(lines[0]["detections"].size(), 1u) << r.output;
+    const auto& d = lines[0]["detections"][0];
+    const std::vector<double> t = d["pose"]["tvec"];
+    EXPECT_NEAR(320 * t[0] / t[2] + cx, d["center"][0].get<double>(), 0.5) << camera;
+    EXPECT_NEAR(320 * t[1] / t[2] + cy, d["center"][1].get<double>(), 0.5) << camera;
+  }
 }
 
 TEST(Cli, HelpDocumentsTheOptions) {

@@ -127,9 +127,10 @@ struct DetectorParams {
   double max_ink_spread = 1.5;
 
   // -- Pose.
-  // Intrinsics and distortion. An empty camera (fx == 0) selects Camera::default_for(frame):
-  // decoding is unaffected; poses are then marked uncalibrated.
-  Camera camera;
+  // Intrinsics and distortion, scaled to the frame by Camera::for_frame. None (the
+  // default) selects Camera::default_for(frame): decoding is unaffected; poses are then
+  // marked uncalibrated. A camera given here must pass Camera::validate().
+  std::optional<Camera> camera;
   double tag_size = 0.1;   // metres, outer edge of the black border
   bool refine_pose = true; // iterative refinement of the final pose on all n^2 centroids
 
@@ -157,6 +158,11 @@ struct Detection {
   double ink_spread = 0;                 // ink per design area, largest / smallest square
   double edge_score = 0;                 // mean Sobel magnitude along the inner border edge
   double reprojection_error = 0;         // RMS of the final pose over the n^2 centroids, pixels
+  // Read from the grey levels under its outline (a far or blurred marker whose squares no
+  // binary image separated; see DetectorParams::second_look): decode_error, worst_cell and
+  // ink_spread are then 0, and the centroids are the squares' centres under the aligned
+  // outline.
+  bool from_outline = false;
 };
 
 // How many candidates each stage let through, and how long each stage took, for one
@@ -174,7 +180,9 @@ struct DetectionStats {
   std::int64_t unambiguous = 0;        // no other id fitting within the decoding margin
   std::int64_t decoded = 0;            // the squares' ink matches the design: detections
   std::int64_t second_looks = 0;       // patches examined again (see DetectorParams::second_look)
-  std::int64_t second_look_found = 0;  // detections made in them
+  std::int64_t second_look_found = 0;  // detections made in them (outline readings included)
+  std::int64_t outline_reads = 0;      // outlines aligned and read where a patch gave no candidate
+  std::int64_t outline_found = 0;      // detections read from outlines
   std::int64_t skipped_by_budget = 0;  // candidates not decoded: DetectorParams::max_candidates was spent
   std::int64_t second_looks_skipped = 0;  // clusters not looked at again: max_second_looks or the budget
   double threshold_ms = 0;             // binarisation

@@ -1,0 +1,172 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// The outline reading (src/detect/outline.cpp): markers whose squares touch in every
+// binary image, read from the grey levels under their aligned outline.
+#include <random>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "lftag/render.hpp"
+#include "scenes.hpp"
+#include "stages.hpp"
+
+using namespace lftag;
+using namespace lftag::detail;
+using lftag::test::paper_camera;
+using lftag::test::random_id;
+using lftag::test::rotation;
+
+namespace {
+
+struct Far {
+  RenderedScene scene;
+  std::array<cv::Point2d, 4> corners;  // true outer corners, clockwise from the top-left
+};
+
+// A marker of family n at `distance` in the paper's camera, turned by `roll` degrees, on
+// a white margin of a quarter of the tag and a mid-grey background.
+Far far_marker(int n, TagId id, double distance, double roll, double blur_px = 0, cv::Point2d offset = {}) {
+  SceneParams p;
+  p.camera = paper_camera();
+  p.blur_length_px = blur_px;
+  SceneMarker m;
+  m.family = Family(n);
+  m.id = id;
+  m.margin_units = std::round(m.family.side() / 4.0);
+  m.tvec = {offset.x, offset.y, distance};
+  m.rvec = rotation(roll, 0, 0);
+  Far far{render_scene(p, {m}), {}};
+  for (int i = 0; i < 4; ++i) far.corners[i] = far.scene.truth[0].corners[i];
+  return far;
+}
+
+// The corners, started from corner `first` and moved by up to `jitter` pixels.
+std::array<cv::Point2d, 4> coarse(const std::array<cv::Point2d, 4>& corners, int first, double jitter,
+                                  std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(-jitter, jitter);
+  std::array<cv::Point2d, 4> out;
+  for (int i = 0; i < 4; ++i) out[i] = corners[(first + i) % 4] + cv::Point2d(u(rng), u(rng));
+  return out;
+}
+
+cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
+  const cv::Vec3d q = h * cv::Vec3d(p.x, p.y, 1);
+  return {q[0] / q[2], q[1] / q[2]};
+}
+
+}  // namespace
+
+TEST(OutlineReading, ReadsFarMarkersFromACoarseOutlineInAnyTurn) {
+  // 3x3 at 28 m: 11 px across, 0.47 px per unit; the squares touch in the frame's binary
+  // image. The outline is given from any corner and up to half a pixel off.
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1);
+  DetectorParams params;
+  int read = 0;
+  for (int trial = 0; trial < 16; ++trial) {
+    const TagId id = random_id(Family(3), rng);
+    const Far far = far_marker(3, id, 28, 180 * u(rng), 0, {0.05 * u(rng), 0.05 * u(rng)});
+    const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.5, rng), Family(3));
+    ASSERT_TRUE(reading);
+    if (!acceptable(*reading, params)) continue;
+    ++read;
+    EXPECT_EQ(reading->id, id) << "trial " << trial;
+    EXPECT_NEAR(reading->pixels_per_unit, 0.47, 0.03);
+    // In the marker's true turn: the squares' centres within half a unit (0.23 px; about
+    // 0.1 px typically).
+    const std::vector<cv::Point2d> centres = Family(3).centers(id);
+    for (int g = 0; g < 9; ++g) {
+      const double e = cv::norm(apply(reading->homography, centres[g]) - far.scene.truth[0].centers[g]);
+      EXPECT_LT(e, 0.5 * reading->pixels_per_unit);
+    }
+  }
+  EXPECT_GE(read, 14);
+}
+
+TEST(OutlineReading, ReadsSquaresThatTouchUnderBlur) {
+  // A 64 px 4x4 marker (5 m) blurred vertically over 13 % of its edge (4 units): the blur
+  // closes the 2 u gaps, so no binary image has its n^2 squares, but the grey levels still
+  // place them.
+  std::mt19937_64 rng(12);
+  DetectorParams params;
+  for (int trial = 0; trial < 6; ++trial) {
+    const TagId id = random_id(Family(4), rng);
+    const Far far = far_marker(4, id, 5, 0, 0.13 * 64);
+    const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 1.0, rng), Family(4));
+    ASSERT_TRUE(reading);
+    EXPECT_TRUE(acceptable(*reading, params)) << "correlation " << reading->correlation << " margin "
+                                              << reading->margin << " baseline gap " << reading->baseline_gap;
+    EXPECT_EQ(reading->id, id);
+  }
+}
+
+TEST(OutlineReading, RefusesQuadsWithoutTheMarkersStructure) {
+  // Quadrilaterals that are not markers: a dark square, a grid of dark tiles centred in
+  // their cells (a facade), noise in a black frame, a marker of another family.
+  DetectorParams params;
+  const std::array<cv::Point2d, 4> quad = {cv::Point2d(40, 40), {111, 40}, {111, 111}, {40, 111}};
+  std::vector<cv::Mat1b> images;
+  cv::Mat1b dark(160, 160, std::uint8_t(230));
+  cv::rectangle(dark, cv::Rect(40, 40, 72, 72), 20, cv::FILLED);
+  images.push_back(dark);
+  cv::Mat1b facade = dark.clone();
+  cv::rectangle(facade, cv::Rect(46, 46, 60, 60), 230, cv::FILLED);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) cv::rectangle(facade, cv::Rect(55 + 18 * c, 55 + 18 * r, 9, 9), 20, cv::FILLED);
+  images.push_back(facade);
+  cv::Mat1b noise = dark.clone();
+  cv::Mat1b inside(60, 60);
+  cv::randu(inside, 0, 256);
+  inside.copyTo(noise(cv::Rect(46, 46, 60, 60)));
+  images.push_back(noise);
+  cv::Mat1b other(160, 160, std::uint8_t(230));
+  const cv::Mat1b five = rasterize_marker(Family(5), 123456, 72.0 / Family(5).side(), 0);
+  five.copyTo(other(cv::Rect(40, 40, five.cols, five.rows)));
+  images.push_back(other);
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    const auto reading = read_outline(ImageView(images[i]), quad, Family(3));
+    EXPECT_FALSE(reading && acceptable(*reading, params)) << "image " << i;
+  }
+}
+
+TEST(OutlineReading, MarkersBelowTheReadableResolutionAreRefused) {
+  // 3x3 at 36 m: 0.37 px per unit, under DetectorParams::min_pixels_per_unit (0.43).
+  std::mt19937_64 rng(13);
+  DetectorParams params;
+  const Far far = far_marker(3, 777, 36, 20);
+  const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, 0, 0.3, rng), Family(3));
+  ASSERT_TRUE(reading);
+  EXPECT_LT(reading->pixels_per_unit, params.min_pixels_per_unit);
+  EXPECT_FALSE(acceptable(*reading, params));
+}
+
+TEST(CoarseOutlines, FindsTheMarkerInsideARingOfBackground) {
+  // A patch's binary image: a dark background's ring around the white margin, the
+  // marker's black pieces inside it.
+  cv::Mat1b black(100, 100, std::uint8_t(0));
+  cv::rectangle(black, cv::Rect(10, 10, 80, 80), 255, 3);  // the ring
+  cv::rectangle(black, cv::Rect(30, 30, 40, 40), 255, cv::FILLED);
+  cv::rectangle(black, cv::Rect(36, 36, 28, 28), 0, cv::FILLED);  // the marker's inside
+  BinaryImage binary;
+  binary.width = 100, binary.height = 100, binary.words_per_row = 2;
+  binary.bits.assign(200, 0);
+  for (int y = 0; y < 100; ++y)
+    for (int x = 0; x < 100; ++x)
+      if (black(y, x)) binary.bits[y * 2 + (x >> 6)] |= std::uint64_t{1} << (x & 63);
+  PatchFrame frame;
+  frame.origin = {200, 100};
+  frame.scale = 2;
+  const auto outlines = coarse_outlines(binary, frame);
+  const auto near = [](cv::Point2d a, cv::Point2d b) { return cv::norm(a - b) < 1.0; };
+  bool marker = false;
+  for (const auto& o : outlines) {
+    // Clockwise on screen, in frame pixels: patch pixel 30 is frame pixel 214.75.
+    if (near(o[0], {214.75, 114.75}) || near(o[1], {214.75, 114.75}) || near(o[2], {214.75, 114.75}) ||
+        near(o[3], {214.75, 114.75}))
+      marker = true;
+    double twice_area = 0;
+    for (int i = 0; i < 4; ++i) twice_area += o[i].x * o[(i + 1) % 4].y - o[(i + 1) % 4].x * o[i].y;
+    EXPECT_GT(twice_area, 0);
+  }
+  EXPECT_TRUE(marker);
+}
