@@ -289,7 +289,9 @@ GST_START_TEST(test_padded_strides) {
     pull_frames(frames, "lftagtestsrc num-buffers=1 count=3 seed=2",
                 (std::string("video/x-raw,width=643,height=481,format=") + format).c_str(), 1);
     GstHarness* h = detector("overlay=outline+id+axes", frames.info);
-    const FrameDetections plain = detections_of(gst_harness_push_and_pull(h, gst_buffer_copy_deep(frames.buffers[0])));
+    GstBuffer* unpadded = gst_harness_push_and_pull(h, gst_buffer_copy_deep(frames.buffers[0]));
+    const FrameDetections plain = detections_of(unpadded);
+    gst_buffer_unref(unpadded);
     fail_unless_equals_int(plain.detections.size(), 3);
 
     GstVideoInfo padded = frames.info;
@@ -984,7 +986,9 @@ GST_START_TEST(test_changes_while_playing) {
   fail_unless(Pixels(clean, frames.info) == original, "the overlay was switched off, yet drawn");
 
   g_object_set(e, "tag-size", 0.25, nullptr);
-  const FrameDetections scaled = detections_of(push());
+  GstBuffer* scaled_buffer = push();
+  const FrameDetections scaled = detections_of(scaled_buffer);
+  gst_buffer_unref(scaled_buffer);
   for (const Detection& d : scaled.detections) {
     const Detection* b = find(before.detections, d.family, d.id);
     fail_unless(d.tag_size == 0.25);
