@@ -308,6 +308,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   for (int i = 0; i < 4; ++i)
     twice_area += outline[i].x * outline[(i + 1) % 4].y - outline[(i + 1) % 4].x * outline[i].y;
   const double per_unit = std::sqrt(std::abs(twice_area) / 2) / side;
+  if (!(per_unit >= 0.2)) return std::nullopt;  // half the readable resolution, or degenerate
   const int enlarge = std::clamp(int(std::ceil(2 / per_unit)), 1, 4);
   cv::Mat1f crop;
   image.mat()(box).convertTo(crop, CV_32F, 1.0 / 255);
