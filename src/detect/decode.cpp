@@ -140,9 +140,13 @@ double gradient_at(const ImageView& im, cv::Point2d p) {
   return std::hypot(g[0], g[1]);
 }
 
+}  // namespace
+
 double grey_at(const ImageView& im, cv::Point2d p) {
   return bilinear(im, p, [&](int x, int y) { return double(im.data[y * im.stride + x]); });
 }
+
+namespace {
 
 std::vector<cv::Point2d> square(double a, double b) {
   return {cv::Point2d(a, a), cv::Point2d(b, a), cv::Point2d(b, b), cv::Point2d(a, b)};

@@ -99,24 +99,13 @@ cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
   return {q[0] / q[2], q[1] / q[2]};
 }
 
-double bilinear(const ImageView& image, cv::Point2d p) {
-  const double x = std::clamp(p.x, 0.0, image.width - 1.0), y = std::clamp(p.y, 0.0, image.height - 1.0);
-  const int x0 = std::min(int(x), image.width - 2 < 0 ? 0 : image.width - 2);
-  const int y0 = std::min(int(y), image.height - 2 < 0 ? 0 : image.height - 2);
-  const int x1 = std::min(x0 + 1, image.width - 1), y1 = std::min(y0 + 1, image.height - 1);
-  const double fx = x - x0, fy = y - y0;
-  const std::uint8_t* r0 = image.data + y0 * image.stride;
-  const std::uint8_t* r1 = image.data + y1 * image.stride;
-  return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
-}
-
 // Mean grey level over the unit rectangle [x, x + w) x [y, y + h) under h.
 double mean_level(const ImageView& image, const cv::Matx33d& h, double x, double y, double w, double hh) {
   constexpr double kStep = 0.25;
   double sum = 0;
   int count = 0;
   for (double v = y + kStep / 2; v < y + hh; v += kStep)
-    for (double u = x + kStep / 2; u < x + w; u += kStep) sum += bilinear(image, apply(h, {u, v})), ++count;
+    for (double u = x + kStep / 2; u < x + w; u += kStep) sum += grey_at(image, apply(h, {u, v})), ++count;
   return count ? sum / count : 0;
 }
 
@@ -153,7 +142,7 @@ CellSamples sample_cell(const ImageView& image, const cv::Matx33d& h, int r, int
   CellSamples s;
   for (int i = 0; i < kCellGrid; ++i)
     for (int j = 0; j < kCellGrid; ++j)
-      s.grey[i * kCellGrid + j] = bilinear(image, apply(h, {6.0 * c + grid_coordinate(j), 6.0 * r + grid_coordinate(i)}));
+      s.grey[i * kCellGrid + j] = grey_at(image, apply(h, {6.0 * c + grid_coordinate(j), 6.0 * r + grid_coordinate(i)}));
   return s;
 }
 

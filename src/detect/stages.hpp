@@ -278,6 +278,10 @@ double edge_gradient(const ImageView& image, const Camera& camera, const cv::Mat
 // Least-squares homography (h33 = 1) taking `from` to `to`; none when degenerate.
 std::optional<cv::Matx33d> fit_homography(const std::vector<cv::Point2d>& from, const std::vector<cv::Point2d>& to);
 
+// The grey level at a sub-pixel point, bilinear between the four pixels around it (the
+// point clamped into the image).
+double grey_at(const ImageView& image, cv::Point2d p);
+
 // Pixels per unit along the marker's most foreshortened direction at unit point u: the
 // smaller singular value of h's Jacobian there (0 when not finite).
 double smallest_scale(const cv::Matx33d& h, cv::Point2d u);
