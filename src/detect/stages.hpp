@@ -210,6 +210,7 @@ struct OutlineReading {
   double baseline_gap = 0;       // how much more the two baseline corners look like baselines
                                  // than the other two (0..1 of the contrast)
   double pixels_per_unit = 0;    // along the most foreshortened direction, at the centre
+  double smear = 0;              // length of the motion blur found, units (0: none)
 };
 
 // Aligns the fixed structure of `family` to the image from `outline` (its outer corners,
@@ -219,7 +220,9 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
 
 // The checks an outline reading must pass to be a detection, each scale-free.
 constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it
+constexpr double kMinSmearedCorrelation = 0.5;  // aligned, below which no motion blur is sought
 constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContrast = 16, kMinMargin = 0.03, kMinBaselineGap = 0.25;
+constexpr double kMaxSmear = 5;  // units: a motion blur must leave a unit of the cells' 6-unit pitch unsmeared
 bool acceptable(const OutlineReading& reading, const DetectorParams& params);
 
 // ---------------------------------------------------------------- keypoints.cpp

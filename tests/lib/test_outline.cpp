@@ -100,6 +100,105 @@ TEST(OutlineReading, ReadsSquaresThatTouchUnderBlur) {
   }
 }
 
+TEST(OutlineReading, ReadsFromTheDataSquaresOrACornerPulledOut) {
+  // Far markers whose coarse outline is poor: the hull of the data squares only (the
+  // border merged with the background), or one corner pulled 4 px out by a spur of the
+  // broken border. 4x4 at 22 m: 14.5 px across, 0.48 px per unit.
+  std::mt19937_64 rng(14);
+  std::uniform_real_distribution<double> u(-1, 1);
+  DetectorParams params;
+  const Family family(4);
+  const int side = family.side();
+  int read = 0;
+  for (int trial = 0; trial < 8; ++trial) {
+    const TagId id = random_id(family, rng);
+    const Far far = far_marker(4, id, 22, 180 * u(rng), 0, {0.05 * u(rng), 0.05 * u(rng)});
+    std::vector<cv::Point2f> units, pixels;
+    for (int i = 0; i < 4; ++i)
+      units.emplace_back(family.outer_corners()[i]), pixels.emplace_back(cv::Point2f(far.corners[i]));
+    const cv::Matx33d h = cv::getPerspectiveTransform(units, pixels);
+    std::array<cv::Point2d, 4> outline;
+    if (trial % 2 == 0) {
+      const double a = 4.5, b = side - 4.5;
+      const std::array<cv::Point2d, 4> data = {cv::Point2d(a, a), {b, a}, {b, b}, {a, b}};
+      for (int i = 0; i < 4; ++i) outline[i] = apply(h, data[i]) + cv::Point2d(0.3 * u(rng), 0.3 * u(rng));
+    } else {
+      outline = coarse(far.corners, 0, 0.3, rng);
+      const cv::Point2d centre = (far.corners[0] + far.corners[2]) / 2;
+      const cv::Point2d out = outline[trial % 4] - centre;
+      outline[trial % 4] += out * (4 / cv::norm(out));
+    }
+    const auto reading = read_outline(ImageView(far.scene.image), outline, family);
+    if (!reading || !acceptable(*reading, params)) continue;
+    ++read;
+    EXPECT_EQ(reading->id, id) << "trial " << trial;
+  }
+  EXPECT_GE(read, 7);
+}
+
+TEST(OutlineReading, ThePixelModelReadsAtTheResolutionBound) {
+  // 3x3 at 29.5 m and 4x4 at 23.5 m (0.45 px per unit): a square's one-unit shift moves
+  // under half a pixel. Interpolated samples blur that away (margins about 0.02); each
+  // pixel's predicted ink share keeps it (margins about 0.15).
+  std::mt19937_64 rng(15);
+  std::uniform_real_distribution<double> u(-1, 1);
+  DetectorParams params;
+  for (const auto& [n, distance] : {std::pair{3, 29.5}, std::pair{4, 23.5}}) {
+    int read = 0;
+    for (int trial = 0; trial < 10; ++trial) {
+      const TagId id = random_id(Family(n), rng);
+      const Far far = far_marker(n, id, distance, 180 * u(rng), 0, {0.05 * u(rng), 0.05 * u(rng)});
+      const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.3, rng), Family(n));
+      ASSERT_TRUE(reading);
+      if (!acceptable(*reading, params)) continue;
+      ++read;
+      EXPECT_EQ(reading->id, id) << n << "x" << n << " trial " << trial;
+      EXPECT_EQ(reading->smear, 0);
+    }
+    EXPECT_GE(read, 9) << n << "x" << n;
+  }
+}
+
+TEST(OutlineReading, FindsTheLengthOfAMotionBlur) {
+  // 64 px 3x3 markers (5 m) blurred by 4.8 units in several directions: the structure is
+  // aligned smeared in the direction and by the length that correlate best, and the cells
+  // are read with the blur's length fitted. 7 units (longer than the cell pitch less one unit) is
+  // refused; nothing is ever misread.
+  std::mt19937_64 rng(16);
+  DetectorParams params;
+  const double unit = 64.0 / Family(3).side();
+  for (const double angle : {0.0, 30.0, 60.0, 90.0}) {
+    for (const double units : {4.8, 7.0}) {
+      const TagId id = random_id(Family(3), rng);
+      SceneParams p;
+      p.camera = paper_camera();
+      p.blur_length_px = units * unit;
+      p.blur_angle_deg = angle;
+      SceneMarker m;
+      m.family = Family(3);
+      m.id = id;
+      m.margin_units = 6;
+      m.tvec = {0.01, -0.02, 5.0};
+      const RenderedScene scene = render_scene(p, {m});
+      std::array<cv::Point2d, 4> corners;
+      for (int i = 0; i < 4; ++i) corners[i] = scene.truth[0].corners[i];
+      const auto reading = read_outline(ImageView(scene.image), coarse(corners, 0, 1.0, rng), Family(3));
+      const bool accepted = reading && acceptable(*reading, params);
+      if (accepted) {
+        EXPECT_EQ(reading->id, id) << angle << " deg, " << units << " units";
+      }
+      if (units < kMaxSmear) {
+        EXPECT_TRUE(accepted) << angle << " deg";
+        if (reading) {
+          EXPECT_NEAR(reading->smear, units, 0.8) << angle << " deg";
+        }
+      } else {
+        EXPECT_FALSE(accepted) << angle << " deg";
+      }
+    }
+  }
+}
+
 TEST(OutlineReading, RefusesQuadsWithoutTheMarkersStructure) {
   // Quadrilaterals that are not markers: a dark square, a grid of dark tiles centred in
   // their cells (a facade), noise in a black frame, a marker of another family.
