@@ -789,11 +789,11 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
         best = c, best_along = along;
     };
     for (int a = 0; a < 8; ++a)
-      for (double units = 1; units <= kMaxSmear + 1; units += 1) try_smear(a * CV_PI / 8, units);
+      for (double units = 1.5; units <= kMaxSmear + 1; units += 1.5) try_smear(a * CV_PI / 8, units);
     if (best_along != cv::Point2d()) {
       const double angle = std::atan2(best_along.y, best_along.x), units = cv::norm(best_along) / crop_per_unit;
       for (const double da : {-CV_PI / 16, 0.0, CV_PI / 16})
-        for (const double du : {-0.5, 0.0, 0.5})
+        for (const double du : {-0.75, 0.0, 0.75})
           if (da != 0 || du != 0) try_smear(angle + da, units + du);
     }
     if (best_along != cv::Point2d()) {
