@@ -54,6 +54,7 @@ std::vector<std::pair<std::string, double>> LftagSystem::counters() const {
           {"unambiguous", double(s.unambiguous)},   {"decoded", double(s.decoded)},
           {"second_looks", double(s.second_looks)}, {"second_look_found", double(s.second_look_found)},
           {"outline_reads", double(s.outline_reads)}, {"outline_found", double(s.outline_found)},
+          {"outline_reads_skipped", double(s.outline_reads_skipped)},
           {"threshold_ms", s.threshold_ms},     {"regions_ms", s.regions_ms},
           {"candidates_ms", s.candidates_ms},   {"keypoints_ms", s.keypoints_ms},
           {"hypotheses_ms", s.hypotheses_ms},   {"decode_ms", s.decode_ms},

@@ -73,7 +73,7 @@ DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   frames += o.frames, regions += o.regions, topology += o.topology, area += o.area, geometry += o.geometry;
   angle += o.angle, collinearity += o.collinearity, residual += o.residual, unambiguous += o.unambiguous;
   decoded += o.decoded, second_looks += o.second_looks, second_look_found += o.second_look_found;
-  outline_reads += o.outline_reads, outline_found += o.outline_found;
+  outline_reads += o.outline_reads, outline_found += o.outline_found, outline_reads_skipped += o.outline_reads_skipped;
   skipped_by_budget += o.skipped_by_budget, second_looks_skipped += o.second_looks_skipped;
   second_look_ms += o.second_look_ms;
   threshold_ms += o.threshold_ms, regions_ms += o.regions_ms, candidates_ms += o.candidates_ms;
@@ -195,10 +195,17 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
 // The marker in a second look's patch whose squares its binary image could not separate:
 // its outline aligned and its cells read from the grey levels (outline.cpp), then posed
 // from the squares' centres under the aligned outline like any other detection.
+// `reads_left`: the frame's remaining outline reads (detail::kMaxOutlineReads a frame).
 void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& frame, const ImageView& work,
-                   const Camera& camera, const DetectorParams& p, DetectionStats& stats, std::vector<Detection>& found) {
+                   const Camera& camera, const DetectorParams& p, DetectionStats& stats, std::vector<Detection>& found,
+                   int& reads_left) {
   for (const std::array<cv::Point2d, 4>& outline : detail::coarse_outlines(binary, frame))
     for (const Family& f : p.families) {
+      if (reads_left <= 0) {
+        ++stats.outline_reads_skipped;
+        continue;
+      }
+      --reads_left;
       ++stats.outline_reads;
       const std::optional<detail::OutlineReading> reading = detail::read_outline(work, outline, f);
       if (!reading || !detail::acceptable(*reading, p)) continue;
@@ -339,6 +346,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
     for (const Detection& d : found)
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
     std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, look, taken);
+    int outline_reads_left = detail::kMaxOutlineReads;
     if (int(boxes.size()) > p.max_second_looks) {
       stats.second_looks_skipped += std::int64_t(boxes.size()) - p.max_second_looks;
       boxes.resize(p.max_second_looks);
@@ -368,7 +376,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       decode_candidates(s.candidates, work, camera, p, true, stats, trace, found);
       if (found.size() == before) {
         start = Clock::now();
-        read_outlines(s.patch_binary, s.patch.frame, work, camera, p, stats, found);
+        read_outlines(s.patch_binary, s.patch.frame, work, camera, p, stats, found, outline_reads_left);
         stats.second_look_ms += elapsed_ms(start);
       }
     }

@@ -222,6 +222,9 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
 constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it
 constexpr double kMinSmearedCorrelation = 0.6;  // aligned, below which no motion blur is sought
 constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContrast = 16, kMinMargin = 0.03, kMinBaselineGap = 0.25;
+// Outline reads a frame at most (each outline and family is one): the work bound of a
+// frame full of marker-like clusters, where every read aligns a template.
+constexpr int kMaxOutlineReads = 32;
 constexpr double kMaxSmear = 5;  // units: a motion blur must leave a unit of the cells' 6-unit pitch unsmeared
 bool acceptable(const OutlineReading& reading, const DetectorParams& params);
 

@@ -493,6 +493,30 @@ TEST(Detector, An8KFrameAndAPaddedStride) {
   EXPECT_EQ(plain[0].centroids, found[0].centroids);
 }
 
+TEST(Detector, OutlineReadsAreBoundedPerFrame) {
+  // A wall of black tiles holding white dots: no candidate, but every tile is a cluster
+  // the second look examines and whose outline it reads for every family. A frame reads
+  // 32 outlines at most and counts the rest.
+  // A tile of 16 x 16 cells: a black square of 12 with 3 x 3 white dots of 2, 2 apart;
+  // 1.5 px a cell (drawn 8 times larger, then reduced by area).
+  cv::Mat1b tile(16 * 8, 16 * 8, std::uint8_t(220));
+  cv::rectangle(tile, cv::Rect(0, 0, 12 * 8, 12 * 8), 25, cv::FILLED);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) cv::rectangle(tile, cv::Rect((2 + 4 * c) * 8, (2 + 4 * r) * 8, 16, 16), 220, cv::FILLED);
+  cv::Mat1b big;
+  cv::repeat(tile, 30, 54, big);  // 720 x 1296 px once reduced
+  cv::Mat1b wall;
+  cv::resize(big, wall, cv::Size(), 1.5 / 8, 1.5 / 8, cv::INTER_AREA);
+  wall = wall(cv::Rect(0, 0, 1280, 720)).clone();
+  DetectorParams params;
+  params.families = Family::all();
+  Detector detector(params);
+  DetectionStats stats;
+  EXPECT_TRUE(detector.detect(ImageView(wall), &stats).empty());
+  EXPECT_EQ(stats.outline_reads, 32);
+  EXPECT_GT(stats.outline_reads_skipped, 0);
+}
+
 TEST(Detector, StatsCountTheFunnelAndTraceRecordsTheStages) {
   SceneParams p;
   p.camera = Camera::pinhole(500, 500, 319.5, 239.5, 640, 480);

@@ -183,6 +183,7 @@ struct DetectionStats {
   std::int64_t second_look_found = 0;  // detections made in them (outline readings included)
   std::int64_t outline_reads = 0;      // outlines aligned and read where a patch gave no candidate
   std::int64_t outline_found = 0;      // detections read from outlines
+  std::int64_t outline_reads_skipped = 0;  // outline reads not made: the frame's bound (32) was reached
   std::int64_t skipped_by_budget = 0;  // candidates not decoded: DetectorParams::max_candidates was spent
   std::int64_t second_looks_skipped = 0;  // clusters not looked at again: max_second_looks or the budget
   double threshold_ms = 0;             // binarisation
