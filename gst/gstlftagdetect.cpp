@@ -960,15 +960,16 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
   ++st.analysed;
   GST_LOG_OBJECT(self, "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT, detections.size(),
                  GST_TIME_ARGS(GST_BUFFER_PTS(buffer)));
-  if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0) && !st.warned_budget) {
+  if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0 || stats.outline_reads_skipped > 0) &&
+      !st.warned_budget) {
     GST_ELEMENT_WARNING(self, STREAM, FAILED,
                         ("The frame at %" GST_TIME_FORMAT " held more candidate markers than the "
-                         "per-frame budget allows (max-candidates=%d): %" G_GINT64_FORMAT
-                         " candidates and %" G_GINT64_FORMAT " second looks were skipped, the most "
-                         "plausible candidates examined first. Markers may be missed in such frames; "
-                         "this is reported once per stream.",
+                         "per-frame budget allows (max-candidates=%d, 32 outline reads): %" G_GINT64_FORMAT
+                         " candidates, %" G_GINT64_FORMAT " second looks and %" G_GINT64_FORMAT
+                         " outline reads were skipped, the most plausible candidates examined first. "
+                         "Markers may be missed in such frames; this is reported once per stream.",
                          GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), s.detector.max_candidates, stats.skipped_by_budget,
-                         stats.second_looks_skipped),
+                         stats.second_looks_skipped, stats.outline_reads_skipped),
                         (nullptr));
     st.warned_budget = true;
   }

@@ -13,6 +13,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "../core/geometry.hpp"
 #include "stages.hpp"
 
 namespace lftag::detail {
@@ -43,12 +44,6 @@ double spread_ratio(const Candidate& c) {
   const double mid = (sxx + syy) / 2, dev = std::hypot((sxx - syy) / 2, sxy);
   const double big = mid + dev, small = std::max(0.0, mid - dev);
   return big > 0 ? std::sqrt(small / big) : 0.0;
-}
-
-double quad_area(const std::array<cv::Point2d, 4>& q) {
-  double a = 0;
-  for (int i = 0; i < 4; ++i) a += q[i].cross(q[(i + 1) % 4]);
-  return a / 2;
 }
 
 }  // namespace

@@ -19,6 +19,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 
+#include "../core/geometry.hpp"
 #include "stages.hpp"
 
 namespace lftag::detail {
@@ -571,10 +572,7 @@ std::vector<std::array<cv::Point2d, 4>> plausible_outlines(const std::array<cv::
     out.push_back(q);
   }
   const cv::Point2d centre = (outline[0] + outline[1] + outline[2] + outline[3]) / 4;
-  double twice_area = 0;
-  for (int i = 0; i < 4; ++i)
-    twice_area += outline[i].x * outline[(i + 1) % 4].y - outline[(i + 1) % 4].x * outline[i].y;
-  const double half = std::sqrt(std::abs(twice_area) / 2) / 2;
+  const double half = std::sqrt(std::abs(quad_area(outline))) / 2;
   const cv::Point2d u(std::cos(edge_angle), std::sin(edge_angle)), v(-u.y, u.x);
   for (const double grow : {1.0, side / (side - 9.0)})
     out.push_back({centre + (-u - v) * half * grow, centre + (u - v) * half * grow, centre + (u + v) * half * grow,
@@ -583,10 +581,7 @@ std::vector<std::array<cv::Point2d, 4>> plausible_outlines(const std::array<cv::
 }
 
 double pixels_per_unit_of(const std::array<cv::Point2d, 4>& outline, int side) {
-  double twice_area = 0;
-  for (int i = 0; i < 4; ++i)
-    twice_area += outline[i].x * outline[(i + 1) % 4].y - outline[(i + 1) % 4].x * outline[i].y;
-  return std::sqrt(std::abs(twice_area) / 2) / side;
+  return std::sqrt(std::abs(quad_area(outline))) / side;
 }
 
 }  // namespace
@@ -632,10 +627,7 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     std::array<cv::Point2d, 4> corners;
     for (int i = 0; i < 4; ++i) corners[i] = frame.to_frame(cv::Point2d(quad[i]));
     // Clockwise on screen (y down): positive shoelace sum.
-    double twice_area = 0;
-    for (int i = 0; i < 4; ++i)
-      twice_area += corners[i].x * corners[(i + 1) % 4].y - corners[(i + 1) % 4].x * corners[i].y;
-    if (twice_area < 0) std::reverse(corners.begin(), corners.end());
+    if (quad_area(corners) < 0) std::reverse(corners.begin(), corners.end());
     out.push_back(corners);
   }
   return out;
@@ -738,8 +730,8 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       }
     }
   }
-  cv::Mat warp = warp_of(start);
   if (start_correlation < kMinStartCorrelation) return std::nullopt;
+  cv::Mat warp = warp_of(start);
   const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 25, 1e-4);
   double correlation = 0;
   try {
@@ -748,8 +740,8 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     return std::nullopt;  // did not converge: not a marker's structure
   }
   // Motion blur smears the structure along one direction, which the template does not: a
-  // structure that aligned but correlates too little is tried smeared along the crop's
-  // least-gradient direction by a few lengths, and aligned again with the best of them.
+  // structure that aligned but correlates too little is tried smeared in several
+  // directions and lengths, and aligned again with the one that correlates best.
   cv::Point2d smear, smear_crop;  // frame pixels, crop pixels
   // A smear of the crop in the pixels of a template that `warp_to_crop` maps onto it (its
   // linear part at the template's centre); none (zero) from a warp far from a marker's.
@@ -775,9 +767,9 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     return out;
   };
   if (correlation < kMinCorrelation && correlation >= kMinSmearedCorrelation) {
-    // Directions every 22.5 degrees (the image's least-gradient direction snaps to the
-    // marker's axes when the blur runs diagonally) and lengths every unit, then half steps
-    // around the best.
+    // Directions every 22.5 degrees and lengths every 1.5 units, then half steps around the
+    // best (the image's own least-gradient direction snaps to the marker's axes when the
+    // blur runs diagonally, so it is searched).
     const double crop_per_unit = per_unit * zx;
     double best = sparse.correlation(crop, warp);
     cv::Point2d best_along;

@@ -12,6 +12,7 @@
 
 #include <gst/video/video.h>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "detectmessages.h"
 #include "metaconversion.h"
@@ -1307,6 +1308,52 @@ GST_START_TEST(test_budget_warning) {
 }
 GST_END_TEST;
 
+// The outline reads' bound: a wall of black tiles holding white dots makes no candidate,
+// but with every family each tile's outline would be read seven times; the frame stops
+// at 32 reads and the stream is warned once.
+GST_START_TEST(test_outline_bound_warning) {
+  cv::Mat1b tile(16 * 8, 16 * 8, std::uint8_t(220));  // 16 cells of 1.5 px, drawn 8 times larger
+  cv::rectangle(tile, cv::Rect(0, 0, 12 * 8, 12 * 8), 25, cv::FILLED);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) cv::rectangle(tile, cv::Rect((2 + 4 * c) * 8, (2 + 4 * r) * 8, 16, 16), 220, cv::FILLED);
+  cv::Mat1b big, wall;
+  cv::repeat(tile, 30, 54, big);
+  cv::resize(big, wall, cv::Size(), 1.5 / 8, 1.5 / 8, cv::INTER_AREA);
+  wall = wall(cv::Rect(0, 0, 1280, 720)).clone();  // continuous: 1280 is a multiple of 4
+
+  GstVideoInfo info;
+  gst_video_info_set_format(&info, GST_VIDEO_FORMAT_GRAY8, wall.cols, wall.rows);
+  const auto warnings = [&](const std::string& families) {
+    GstHarness* h = detector("families=" + families, info);
+    GstBus* bus = gst_bus_new();
+    gst_element_set_bus(h->element, bus);
+    for (int i = 0; i < 2; ++i) {
+      GstBuffer* in = gst_buffer_new_memdup(wall.data, wall.total());
+      GST_BUFFER_PTS(in) = gst_util_uint64_scale(i, GST_SECOND, 30);
+      gst_buffer_unref(gst_harness_push_and_pull(h, in));
+    }
+    std::size_t count = 0;
+    while (GstMessage* m = gst_bus_pop_filtered(bus, GST_MESSAGE_WARNING)) {
+      GError* error = nullptr;
+      gst_message_parse_warning(m, &error, nullptr);
+      const std::string text = error->message;
+      fail_unless(text.find("outline reads were skipped") != std::string::npos &&
+                      text.find(" and 0 outline reads") == std::string::npos,
+                  "%s", error->message);
+      g_error_free(error);
+      gst_message_unref(m);
+      ++count;
+    }
+    gst_element_set_bus(h->element, nullptr);
+    gst_object_unref(bus);
+    gst_harness_teardown(h);
+    return count;
+  };
+  // Two such frames with every family: one warning for the stream.
+  fail_unless_equals_int(warnings("2x2,3x3,4x4,5x5,6x6,7x7,8x8"), 1);
+}
+GST_END_TEST;
+
 // A frame that cannot be analysed passes on untouched; the next one is analysed.
 GST_START_TEST(test_bad_frame_passes) {
   Frames frames;
@@ -1542,6 +1589,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_uncalibrated_warning);
   tcase_add_test(tc, test_camera_not_set);
   tcase_add_test(tc, test_budget_warning);
+  tcase_add_test(tc, test_outline_bound_warning);
   tcase_add_test(tc, test_bad_frame_passes);
   tcase_add_test(tc, test_late_frames);
   tcase_add_test(tc, test_late_frames_in_a_live_pipeline);
