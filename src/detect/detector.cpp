@@ -198,17 +198,33 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
 // `reads_left`: the frame's remaining outline reads (detail::kMaxOutlineReads a frame).
 void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& frame, const ImageView& work,
                    const Camera& camera, const DetectorParams& p, DetectionStats& stats, std::vector<Detection>& found,
-                   int& reads_left) {
+                   int& reads_left, DetectionTrace* trace) {
   for (const std::array<cv::Point2d, 4>& outline : detail::coarse_outlines(binary, frame))
     for (const Family& f : p.families) {
+      OutlineVerdict* verdict = nullptr;
+      if (trace) {
+        verdict = &trace->outline_reads.emplace_back();
+        verdict->family = f, verdict->outline = outline;
+      }
       if (reads_left <= 0) {
         ++stats.outline_reads_skipped;
+        if (verdict) verdict->stage = Stage::budget;
         continue;
       }
       --reads_left;
       ++stats.outline_reads;
       const std::optional<detail::OutlineReading> reading = detail::read_outline(work, outline, f);
-      if (!reading || !detail::acceptable(*reading, p)) continue;
+      const Stage stage = reading ? detail::outline_stage(*reading, p) : Stage::alignment;
+      if (verdict) {
+        verdict->stage = stage;
+        if (reading) {
+          if (stage >= Stage::resolution) verdict->reading = reading->id;  // the cells were read
+          verdict->correlation = reading->correlation, verdict->marker_correlation = reading->marker_correlation;
+          verdict->contrast = reading->contrast, verdict->margin = reading->margin;
+          verdict->pixels_per_unit = reading->pixels_per_unit, verdict->smear = reading->smear;
+        }
+      }
+      if (stage != Stage::detected) continue;
       // Blobs at the centroids of the squares under the homography, which is what the
       // pose's perspective correction expects of a blob.
       detail::Candidate c;
@@ -238,7 +254,14 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
       det.from_outline = true;
       const std::array<int, 4> keypoint_cells = f.keypoint_cells();
       for (int i = 0; i < 4; ++i) det.keypoints[i] = observed[keypoint_cells[i]];
-      if (!detail::estimate_pose(c, d, camera, p, det) || already_found(found, det.center)) continue;
+      if (!detail::estimate_pose(c, d, camera, p, det)) {
+        if (verdict) verdict->stage = Stage::pose;
+        continue;
+      }
+      if (already_found(found, det.center)) {
+        if (verdict) verdict->stage = Stage::duplicate;
+        continue;
+      }
       ++stats.decoded, ++stats.second_look_found, ++stats.outline_found;
       found.push_back(std::move(det));
       return;  // one marker to a patch
@@ -254,10 +277,16 @@ const char* stage_name(Stage stage) {
     case Stage::geometry: return "geometry";
     case Stage::angle: return "angle";
     case Stage::collinearity: return "collinearity";
+    case Stage::alignment: return "alignment";
+    case Stage::structure: return "structure";
+    case Stage::contrast: return "contrast";
+    case Stage::baselines: return "baselines";
     case Stage::resolution: return "resolution";
     case Stage::decoding: return "decoding";
     case Stage::margin: return "margin";
     case Stage::ink: return "ink";
+    case Stage::marker: return "marker";
+    case Stage::smear: return "smear";
     case Stage::pose: return "pose";
     case Stage::duplicate: return "duplicate";
     case Stage::detected: return "detected";
@@ -376,7 +405,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       decode_candidates(s.candidates, work, camera, p, true, stats, trace, found);
       if (found.size() == before) {
         start = Clock::now();
-        read_outlines(s.patch_binary, s.patch.frame, work, camera, p, stats, found, outline_reads_left);
+        read_outlines(s.patch_binary, s.patch.frame, work, camera, p, stats, found, outline_reads_left, trace);
         stats.second_look_ms += elapsed_ms(start);
       }
     }

@@ -902,15 +902,21 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
 }
 
 
-bool acceptable(const OutlineReading& r, const DetectorParams& params) {
+Stage outline_stage(const OutlineReading& r, const DetectorParams& params) {
   // Measured on the range and blur renders and on marker-free photos (docs/BENCHMARKS.md),
   // with the pixel model's reading: true readings align at 0.78 to 0.99 and have margins
   // around 0.15 (5 % under 0.01); wrong readings above the resolution bound had margins up
   // to 0.022 (below it, up to 0.09), and under motion blur none passed once the blur's
   // length is fitted.
-  return r.pixels_per_unit >= params.min_pixels_per_unit && r.correlation >= kMinCorrelation &&
-         r.marker_correlation >= kMinMarkerCorrelation && r.contrast >= kMinContrast && r.margin >= kMinMargin &&
-         r.baseline_gap >= kMinBaselineGap && r.smear <= kMaxSmear;
+  // In the order read_outline decides them.
+  if (r.correlation < kMinCorrelation) return Stage::structure;
+  if (r.contrast < kMinContrast) return Stage::contrast;
+  if (r.baseline_gap < kMinBaselineGap) return Stage::baselines;
+  if (r.pixels_per_unit < params.min_pixels_per_unit) return Stage::resolution;
+  if (r.margin < kMinMargin) return Stage::margin;
+  if (r.marker_correlation < kMinMarkerCorrelation) return Stage::marker;
+  if (r.smear > kMaxSmear) return Stage::smear;
+  return Stage::detected;
 }
 
 }  // namespace lftag::detail

@@ -226,7 +226,12 @@ constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContr
 // frame full of marker-like clusters, where every read aligns a template.
 constexpr int kMaxOutlineReads = 32;
 constexpr double kMaxSmear = 5;  // units: a motion blur must leave a unit of the cells' 6-unit pitch unsmeared
-bool acceptable(const OutlineReading& reading, const DetectorParams& params);
+// The first check `reading` fails (Stage::detected when it passes them all), and whether
+// it passes them all.
+Stage outline_stage(const OutlineReading& reading, const DetectorParams& params);
+inline bool acceptable(const OutlineReading& reading, const DetectorParams& params) {
+  return outline_stage(reading, params) == Stage::detected;
+}
 
 // ---------------------------------------------------------------- keypoints.cpp
 // Blob indices of K0..K3 after the geometry, angle and collinearity constraints.

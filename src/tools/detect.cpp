@@ -51,6 +51,21 @@ nlohmann::json verdict_json(const CandidateVerdict& v) {
   return out;
 }
 
+// One outline read of a second look and the check that stopped it (--why).
+nlohmann::json outline_json(const OutlineVerdict& v) {
+  nlohmann::json out = {{"family", v.family.name()},
+                        {"stage", stage_name(v.stage)},
+                        {"outline", points_json({v.outline.begin(), v.outline.end()})},
+                        {"correlation", v.correlation},
+                        {"marker_correlation", v.marker_correlation},
+                        {"contrast", v.contrast},
+                        {"margin", v.margin},
+                        {"pixels_per_unit", v.pixels_per_unit},
+                        {"smear", v.smear}};
+  if (v.reading) out["reading"] = id_json(*v.reading);
+  return out;
+}
+
 }  // namespace
 
 void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
@@ -151,6 +166,8 @@ void add_detect_command(CLI::App& app, int& status) {
         if (opt->why) {
           out["candidates"] = nlohmann::json::array();
           for (const CandidateVerdict& v : trace.verdicts) out["candidates"].push_back(verdict_json(v));
+          out["outline_reads"] = nlohmann::json::array();
+          for (const OutlineVerdict& v : trace.outline_reads) out["outline_reads"].push_back(outline_json(v));
         }
         total += stats;
         if (!opt->debug_dir.empty()) {

@@ -239,6 +239,39 @@ TEST(Cli, DetectWhyNamesTheStageThatStoppedEachCandidate) {
   EXPECT_FALSE(json_lines(run("detect " + img).output)[0].contains("candidates"));
 }
 
+TEST(Cli, DetectWhyListsTheOutlineReads) {
+  // A 3x3 at 29 m (11 px) on a white margin, whose squares no binary image separates: no
+  // candidate, but --why lists the outline reads of its second look, the one that found
+  // it with its reading, and the stage that stopped the others.
+  const std::string img = kTmp + "/why-outline.png", scene = kTmp + "/why-outline.json";
+  std::ofstream(scene) << R"({"markers": [{"family": "3x3", "id": 6789, "tag_size": 1, "tvec": [-6, 0, 29], "roll": 30}]})";
+  ASSERT_EQ(run("render --margin 6 --scene " + scene + " --output " + img).status, 0);
+  const CliResult r = run("detect --why --stats --family 3x3 " + img);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto lines = json_lines(r.output);
+  ASSERT_EQ(lines.size(), 1u) << r.output;
+  const auto& o = lines[0];
+  ASSERT_EQ(o["detections"].size(), 1u) << r.output;
+  EXPECT_EQ(o["detections"][0]["id"], 6789);
+  EXPECT_TRUE(o["detections"][0]["from_outline"].get<bool>());
+  ASSERT_EQ(o["outline_reads"].size(), o["stats"]["funnel"]["outline_reads"].get<std::size_t>());
+  const std::set<std::string> known = {"budget",     "alignment", "structure", "contrast", "baselines", "resolution",
+                                       "margin",     "marker",    "smear",     "pose",     "duplicate", "detected"};
+  int detected = 0;
+  for (const auto& c : o["outline_reads"]) {
+    EXPECT_EQ(known.count(c["stage"].get<std::string>()), 1u) << c;
+    EXPECT_EQ(c["outline"].size(), 4u);
+    EXPECT_EQ(c["family"], "3x3");
+    if (c["stage"] != "detected") continue;
+    ++detected;
+    EXPECT_EQ(c["reading"], 6789);
+    EXPECT_GE(c["correlation"].get<double>(), 0.75);
+    EXPECT_GE(c["margin"].get<double>(), 0.03);
+  }
+  EXPECT_EQ(detected, 1);
+  EXPECT_FALSE(json_lines(run("detect " + img).output)[0].contains("outline_reads"));
+}
+
 TEST(Cli, DetectRejectsBadConfiguration) {
   CliResult r = run("detect --family 3x4 x.png");
   EXPECT_EQ(r.status, 2);

@@ -226,13 +226,27 @@ TEST(Detector, OutlineReadingFindsMarkersWhoseSquaresTouch) {
   params.camera = paper_camera();
   Detector detector(params);
   DetectionStats stats;
-  const std::vector<Detection> found = detector.detect(ImageView(scene.image), &stats);
+  DetectionTrace trace;
+  const std::vector<Detection> found = detector.detect(ImageView(scene.image), &stats, &trace);
   ASSERT_EQ(found.size(), 1u);
   EXPECT_EQ(found[0].id, TagId(9999));
   EXPECT_TRUE(found[0].from_outline);
   EXPECT_EQ(stats.outline_found, 1);
   EXPECT_GE(stats.outline_reads, 1);
   EXPECT_EQ(found[0].centroids.size(), 9u);
+  // The trace holds every outline read with the check that stopped it: here the last one
+  // read is the marker.
+  ASSERT_EQ(std::int64_t(trace.outline_reads.size()), stats.outline_reads + stats.outline_reads_skipped);
+  const OutlineVerdict& read = trace.outline_reads.back();
+  EXPECT_EQ(read.stage, Stage::detected);
+  EXPECT_EQ(read.reading, std::optional<TagId>(9999));
+  EXPECT_GE(read.correlation, 0.75);
+  EXPECT_GE(read.marker_correlation, 0.75);
+  EXPECT_GE(read.margin, 0.03);
+  EXPECT_NEAR(read.pixels_per_unit, 64.0 / Family(3).side(), 0.2 * 64 / Family(3).side());
+  EXPECT_NEAR(cv::norm(found[0].center - (read.outline[0] + read.outline[2]) / 2), 0, 2.0);
+  for (std::size_t i = 0; i + 1 < trace.outline_reads.size(); ++i)
+    EXPECT_NE(trace.outline_reads[i].stage, Stage::detected);
 }
 
 TEST(Detector, PoseWithinOneDegreeAndOnePercent) {
@@ -512,9 +526,18 @@ TEST(Detector, OutlineReadsAreBoundedPerFrame) {
   params.families = Family::all();
   Detector detector(params);
   DetectionStats stats;
-  EXPECT_TRUE(detector.detect(ImageView(wall), &stats).empty());
+  DetectionTrace trace;
+  EXPECT_TRUE(detector.detect(ImageView(wall), &stats, &trace).empty());
   EXPECT_EQ(stats.outline_reads, 32);
   EXPECT_GT(stats.outline_reads_skipped, 0);
+  // --why shows the skipped reads as "budget", and no read passed.
+  ASSERT_EQ(std::int64_t(trace.outline_reads.size()), stats.outline_reads + stats.outline_reads_skipped);
+  EXPECT_EQ(std::count_if(trace.outline_reads.begin(), trace.outline_reads.end(),
+                          [](const OutlineVerdict& v) { return v.stage == Stage::budget; }),
+            stats.outline_reads_skipped);
+  for (const OutlineVerdict& v : trace.outline_reads) EXPECT_NE(v.stage, Stage::detected);
+  EXPECT_STREQ(stage_name(Stage::alignment), "alignment");
+  EXPECT_STREQ(stage_name(Stage::smear), "smear");
 }
 
 TEST(Detector, StatsCountTheFunnelAndTraceRecordsTheStages) {

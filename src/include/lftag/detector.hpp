@@ -198,17 +198,24 @@ struct DetectionStats {
   DetectionStats& operator+=(const DetectionStats& other);
 };
 
-// Where a topological candidate stopped, in pipeline order.
+// Where a topological candidate or an outline read stopped, in pipeline order.
 enum class Stage {
   area,          // the area constraint (tau1)
-  budget,        // not examined: the frame's candidate budget was spent (max_candidates)
+  budget,        // not examined: the frame's candidate budget (max_candidates) or its
+                 // outline reads were spent
   geometry,      // the geometry constraint, on every side of the hull
   angle,         // the angle constraint
   collinearity,  // the collinearity constraint (tau2)
+  alignment,     // outline read: the marker's structure did not align from the outline
+  structure,     // outline read: the aligned structure correlated under 0.75
+  contrast,      // outline read: too little contrast between the white ring and the cells
+  baselines,     // outline read: no two corners stand out as the baselines
   resolution,    // too few pixels per unit to read (min_pixels_per_unit)
   decoding,      // no reading within tau3 and the cell residual bound
   margin,        // another id fitted within the decoding margin
   ink,           // the squares' ink did not match the design on any side
+  marker,        // outline read: the whole marker of the id read fitted under 0.75
+  smear,         // outline read: a motion blur longer than 5 units (cells look alike)
   pose,          // no pose could be computed
   duplicate,     // a marker already found at its place
   detected,
@@ -225,6 +232,21 @@ struct CandidateVerdict {
   double decode_error = 0, worst_cell = 0;  // of that reading
 };
 
+// One outline read of a second look (a marker whose squares its binary image could not
+// separate, read from the grey levels under its aligned outline) and its fate.
+struct OutlineVerdict {
+  Family family{3};
+  std::array<cv::Point2d, 4> outline{};  // the coarse outline read from, frame pixels
+  Stage stage = Stage::detected;
+  std::optional<TagId> reading;          // the id read, when reading ran
+  double correlation = 0;                // of the aligned structure (0 when it did not align)
+  double marker_correlation = 0;         // of the whole marker of the id read
+  double contrast = 0;                   // white ring minus the cells' cores, grey levels
+  double margin = 0;                     // how much worse each cell's runner-up fits (least)
+  double pixels_per_unit = 0;            // along the most foreshortened direction
+  double smear = 0;                      // length of the motion blur found, units
+};
+
 // What the stages saw, for debug images (see draw.hpp) and for tuning: filled only on request.
 struct DetectionTrace {
   cv::Mat binary;                                     // 255 = black, as thresholded
@@ -233,6 +255,7 @@ struct DetectionTrace {
   std::vector<std::vector<std::vector<cv::Point2d>>> hypotheses;  // per candidate: 16 projected inner edges
   std::vector<Detection> detections;
   std::vector<CandidateVerdict> verdicts;             // every topological candidate
+  std::vector<OutlineVerdict> outline_reads;          // every outline read (and skipped)
   std::vector<cv::Rect> second_looks;                 // the clusters looked at again
 };
 
