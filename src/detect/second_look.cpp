@@ -45,6 +45,33 @@ double ring_ink(const BinaryImage& binary, const Cluster& b) {
   return count ? double(black) / count : 1.0;
 }
 
+// Black pixels on the outline of region r's convex hull moved out by a tenth of its size
+// (at least two pixels), over the outline's length: unlike its box's ring, this stays on
+// the white margin of a turned sheet.
+double hull_ring_ink(const RegionTree& tree, const BinaryImage& binary, int r) {
+  std::vector<cv::Point> ends;
+  tree.for_each_run(r, [&](int y, int x0, int x1) { ends.emplace_back(x0, y), ends.emplace_back(x1 - 1, y); });
+  std::vector<cv::Point> hull;
+  cv::convexHull(ends, hull);
+  const Region& g = tree.regions[r];
+  const double size = std::max(g.x1 - g.x0, g.y1 - g.y0) + 1;
+  const double grow = 1 + std::max(0.2, 4 / size);
+  const cv::Point2d centre((g.x0 + g.x1) / 2.0, (g.y0 + g.y1) / 2.0);
+  int black = 0, count = 0;
+  for (std::size_t i = 0; i < hull.size(); ++i) {
+    const cv::Point2d a = centre + (cv::Point2d(hull[i]) - centre) * grow;
+    const cv::Point2d b = centre + (cv::Point2d(hull[(i + 1) % hull.size()]) - centre) * grow;
+    const int steps = std::max(1, int(std::ceil(cv::norm(b - a))));
+    for (int k = 0; k < steps; ++k) {
+      const cv::Point q(cvRound(a.x + (b.x - a.x) * k / steps), cvRound(a.y + (b.y - a.y) * k / steps));
+      if (q.x < 0 || q.y < 0 || q.x >= binary.width || q.y >= binary.height) continue;
+      ++count;
+      black += binary.black(q.x, q.y);
+    }
+  }
+  return count ? double(black) / count : 1.0;
+}
+
 }  // namespace
 
 std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const SecondLook& look,
@@ -106,6 +133,37 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const cv::Rect box(c.x0, c.y0, w, h);
     if (std::any_of(taken.begin(), taken.end(), [&](const cv::Rect& t) { return (t & box).area() > 0; })) continue;
     found.emplace_back(ring, box);
+  }
+  // A marker's border closed around a white hole that holds some of its squares, the
+  // others joined to the border: its cluster can take in the background's dark specks
+  // beside the sheet (the box of a turned sheet reaches past its margin), so the border
+  // is also looked at alone.
+  for (int r = 1; r < int(tree.regions.size()); ++r) {
+    const Region& g = tree.regions[r];
+    if (!g.black || g.child_count == 0) continue;
+    const int w = g.x1 - g.x0 + 1, h = g.y1 - g.y0 + 1;
+    if (std::max(w, h) < look.min_size || std::max(w, h) > look.max_size || std::max(w, h) > 3 * std::min(w, h))
+      continue;
+    // Its largest hole with what the hole holds: the marker inside its border.
+    int hole = -1;
+    for (int i = 0; i < g.child_count; ++i)
+      if (hole < 0 || tree.regions[tree.children_of(r)[i]].area > tree.regions[hole].area) hole = tree.children_of(r)[i];
+    const Region& white = tree.regions[hole];
+    int inside = white.area, squares = 0;
+    for (int i = 0; i < white.child_count; ++i) {
+      const Region& k = tree.regions[tree.children_of(hole)[i]];
+      inside += k.area;
+      squares += k.area >= 2;
+    }
+    const double hole_fill = double(inside) / (w * h);
+    if (squares < 2 || hole_fill < 0.2 || hole_fill > 0.8) continue;
+    const cv::Rect box(g.x0, g.y0, w, h);
+    const auto overlaps = [&](const cv::Rect& t) { return (t & box).area() > 0; };
+    if (std::any_of(taken.begin(), taken.end(), overlaps) ||
+        std::any_of(found.begin(), found.end(), [&](const auto& f) { return overlaps(f.second); }))
+      continue;
+    const double ring = hull_ring_ink(tree, binary, r);
+    if (ring <= 0.25) found.emplace_back(ring, box);
   }
   // The most isolated first: a printed marker sits on its white margin.
   std::stable_sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.first < b.first; });

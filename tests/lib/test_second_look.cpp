@@ -46,10 +46,9 @@ TEST(NearCandidates, BlobsLettersTexturesAndTakenPlacesAreNot) {
   cv::line(black, cv::Point(100, 10), cv::Point(160, 25), 255, 2);  // a stroke: too thin a box
   EXPECT_TRUE(clusters_of(black).empty());
   // Pieces on a dark ground rather than on paper.
-  cv::Mat1b ground(120, 160, std::uint8_t(0));
+  cv::Mat1b ground(120, 160, std::uint8_t(255));
+  ground(cv::Rect(28, 38, 24, 24)).setTo(0);
   draw_pieces(ground, 30, 40);
-  ground(cv::Rect(20, 30, 40, 9)).setTo(255), ground(cv::Rect(20, 61, 40, 9)).setTo(255);
-  ground(cv::Rect(20, 39, 9, 22)).setTo(255), ground(cv::Rect(51, 39, 9, 22)).setTo(255);
   EXPECT_TRUE(clusters_of(ground).empty());
   // A texture of pieces larger than any marker looked at.
   cv::Mat1b texture(300, 300, std::uint8_t(0));
@@ -70,6 +69,42 @@ TEST(NearCandidates, BlobsLettersTexturesAndTakenPlacesAreNot) {
   for (int y = 0; y < 10; ++y)
     for (int x = 0; x < 10; ++x) huge(cv::Rect(50 + 25 * x, 50 + 25 * y, 16, 16)).setTo(255);
   EXPECT_TRUE(clusters_of(huge).empty());
+}
+
+TEST(NearCandidates, AClosedBorderAroundSomeSquaresIsLookedAt) {
+  // A marker turned 45 degrees whose border stayed closed, two of its nine squares joined
+  // to it: its box is only a quarter ink, so it fails as a cluster, but the border with
+  // seven squares in its hole is looked at. Specks of the background that reach into the
+  // box's corners do not matter.
+  const cv::Point2d centre(80, 60);
+  const auto at = [&](double u, double v) {  // marker units (0..24) -> pixels, 40 px edge
+    const double s = 40.0 / 24 / std::sqrt(2.0);
+    return cv::Point(cvRound(centre.x + s * ((u - 12) - (v - 12))), cvRound(centre.y + s * ((u - 12) + (v - 12))));
+  };
+  const auto fill = [&](cv::Mat1b& image, double u0, double v0, double u1, double v1) {
+    const std::vector<cv::Point> q = {at(u0, v0), at(u1, v0), at(u1, v1), at(u0, v1)};
+    cv::fillConvexPoly(image, q, 255);
+  };
+  cv::Mat1b black(120, 160, std::uint8_t(0));
+  fill(black, 0, 0, 24, 24);
+  cv::Mat1b hole(black.size(), std::uint8_t(0));
+  fill(hole, 2, 2, 22, 22);
+  black.setTo(0, hole);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) fill(black, 5 + 6 * c, 5 + 6 * r, 9 + 6 * c, 9 + 6 * r);
+  fill(black, 1, 5, 6, 9), fill(black, 17, 18, 23, 22);  // two squares joined to the border
+  black(cv::Rect(52, 32, 3, 3)).setTo(255), black(cv::Rect(105, 85, 3, 3)).setTo(255);  // specks
+  const std::vector<cv::Rect> boxes = clusters_of(black);
+  ASSERT_EQ(boxes.size(), 1u);
+  EXPECT_NEAR(boxes[0].x + boxes[0].width / 2.0, centre.x, 3);
+  EXPECT_NEAR(boxes[0].y + boxes[0].height / 2.0, centre.y, 3);
+  EXPECT_NEAR(boxes[0].width, 57, 4);
+  // The same border on a dark ground, with hardly any paper around it, is not.
+  cv::Mat1b ground(black.size(), std::uint8_t(255));
+  cv::Mat1b paper(black.size(), std::uint8_t(0));
+  fill(paper, -1, -1, 25, 25);
+  ground.setTo(0, paper);
+  EXPECT_TRUE(clusters_of(ground | black).empty());
 }
 
 TEST(SecondLookPatch, ReopensOnePixelGapsBesideABrightMargin) {
