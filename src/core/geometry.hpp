@@ -3,6 +3,8 @@
 #pragma once
 
 #include <array>
+#include <cmath>
+#include <optional>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -27,6 +29,33 @@ inline double quad_area(const std::array<cv::Point2d, 4>& q) {
   double a = 0;
   for (int i = 0; i < 4; ++i) a += q[i].cross(q[(i + 1) % 4]);
   return a / 2;
+}
+
+// Indices of the four vertices of a convex polygon (vertices in order) that span the
+// largest quadrilateral, in the polygon's order; none when it has fewer than four or no
+// area. For each diagonal, the farthest vertex on either side: O(n^3).
+inline std::optional<std::array<int, 4>> largest_quad(const std::vector<cv::Point2d>& convex) {
+  const int h = int(convex.size());
+  if (h < 4) return std::nullopt;
+  const auto at = [&](int i) { return convex[std::size_t(i % h)]; };
+  std::array<int, 4> best{};
+  double best_area = 0;
+  for (int a = 0; a < h; ++a)
+    for (int d = a + 2; d < h; ++d) {
+      const cv::Point2d base = at(d) - at(a);
+      // The vertices between a and d lie on one side of the diagonal, those after d on
+      // the other.
+      int b = -1, e = -1;
+      double left = 0, right = 0;
+      for (int i = a + 1; i < d; ++i)
+        if (const double t = std::abs(base.cross(at(i) - at(a))); t > left) left = t, b = i;
+      for (int i = d + 1; i < a + h; ++i)
+        if (const double t = std::abs(base.cross(at(i) - at(a))); t > right) right = t, e = i % h;
+      if (b < 0 || e < 0) continue;
+      if (const double area = (left + right) / 2; area > best_area) best_area = area, best = {a, b, d, e};
+    }
+  if (!(best_area > 0)) return std::nullopt;
+  return best;
 }
 
 }  // namespace lftag::detail

@@ -48,36 +48,20 @@ double spread_ratio(const Candidate& c) {
 
 }  // namespace
 
-// For each diagonal (a, d) of the hull,
-// the best other corners are the hull vertices farthest from it on either side: cubic in
-// the hull's size, where trying every 4-subset was quartic (635,000 quadrilaterals for
-// the 67 blobs of an 8x8 candidate on a ring of dots).
+// The hull's largest quadrilateral (largest_quad): cubic in the hull's size, where trying
+// every 4-subset was quartic (635,000 quadrilaterals for the 67 blobs of an 8x8 candidate
+// on a ring of dots).
 std::vector<int> hull_corners(const Candidate& c) {
   std::vector<cv::Point2f> points;
   for (const Blob& b : c.blobs) points.emplace_back(cv::Point2f(b.point));
   std::vector<int> hull;
   cv::convexHull(points, hull, false, false);
-  const int h = int(hull.size());
-  if (h < 4) return {};
-  const auto at = [&](int i) { return c.blobs[hull[i % h]].point; };
-  std::array<int, 4> best{};
-  double best_area = 0;
-  for (int a = 0; a < h; ++a)
-    for (int d = a + 2; d < h; ++d) {
-      const cv::Point2d base = at(d) - at(a);
-      // The hull is convex, so the vertices between a and d lie on one side of the
-      // diagonal and those after d on the other.
-      int b = -1, e = -1;
-      double left = 0, right = 0;
-      for (int i = a + 1; i < d; ++i)
-        if (const double t = std::abs(base.cross(at(i) - at(a))); t > left) left = t, b = i;
-      for (int i = d + 1; i < a + h; ++i)
-        if (const double t = std::abs(base.cross(at(i) - at(a))); t > right) right = t, e = i % h;
-      if (b < 0 || e < 0) continue;
-      if (const double area = (left + right) / 2; area > best_area) best_area = area, best = {hull[a], hull[b], hull[d], hull[e]};
-    }
-  if (!(best_area > 0)) return {};
-  std::vector<int> out(best.begin(), best.end());
+  std::vector<cv::Point2d> polygon;
+  for (const int i : hull) polygon.push_back(c.blobs[i].point);
+  const std::optional<std::array<int, 4>> quad = largest_quad(polygon);
+  if (!quad) return {};
+  std::vector<int> out;
+  for (const int i : *quad) out.push_back(hull[i]);
   const std::array<cv::Point2d, 4> q = {c.blobs[out[0]].point, c.blobs[out[1]].point, c.blobs[out[2]].point,
                                         c.blobs[out[3]].point};
   if (quad_area(q) < 0) std::reverse(out.begin(), out.end());  // clockwise with y down

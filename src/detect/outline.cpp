@@ -605,11 +605,34 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
   for (int i = 0; i < int(contours.size()); ++i) {
     // Outer boundaries of black pieces are at even depths; visit each parent's group once.
     if (depth(i) % 2 != 0 || hierarchy[i][1] >= 0) continue;
-    points.clear();
+    // The group grows from its largest piece by the pieces near it: a speck of the margin
+    // or of the ground further off would pull a corner of the hull out.
+    std::vector<int> pieces;
+    std::vector<cv::Rect> boxes;
     for (int j = i; j >= 0; j = hierarchy[j][0]) {
       const cv::Rect r = cv::boundingRect(contours[j]);
       if ((r & inner) != r) continue;
-      points.insert(points.end(), contours[j].begin(), contours[j].end());
+      pieces.push_back(j), boxes.push_back(r);
+    }
+    if (pieces.empty()) continue;
+    const int largest = int(std::max_element(boxes.begin(), boxes.end(), [](const cv::Rect& a, const cv::Rect& b) {
+                              return a.area() < b.area();
+                            }) - boxes.begin());
+    const int gap = std::max(4, std::max(boxes[largest].width, boxes[largest].height) / 10);
+    std::vector<bool> taken(pieces.size(), false);
+    taken[largest] = true;
+    points.assign(contours[pieces[largest]].begin(), contours[pieces[largest]].end());
+    for (bool grew = true; grew;) {
+      grew = false;
+      for (std::size_t a = 0; a < pieces.size(); ++a) {
+        if (taken[a]) continue;
+        const cv::Rect near(boxes[a].x - gap, boxes[a].y - gap, boxes[a].width + 2 * gap, boxes[a].height + 2 * gap);
+        for (std::size_t b = 0; b < pieces.size() && !taken[a]; ++b)
+          if (taken[b] && (near & boxes[b]).area() > 0) {
+            taken[a] = grew = true;
+            points.insert(points.end(), contours[pieces[a]].begin(), contours[pieces[a]].end());
+          }
+      }
     }
     if (points.size() < 4) continue;
     std::vector<cv::Point> hull;
@@ -623,7 +646,14 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     std::vector<cv::Point> quad;
     const double perimeter = cv::arcLength(hull, true);
     for (double f = 0.02; f <= 0.2 && quad.size() != 4; f += 0.02) cv::approxPolyDP(hull, quad, f * perimeter, true);
-    if (quad.size() != 4 || !cv::isContourConvex(quad)) continue;
+    if (quad.size() != 4 || !cv::isContourConvex(quad)) {
+      // Rounded corners can take the approximation from five vertices to three: the
+      // hull's largest quadrilateral instead.
+      const std::optional<std::array<int, 4>> largest = largest_quad(std::vector<cv::Point2d>(hull.begin(), hull.end()));
+      if (!largest) continue;
+      quad.clear();
+      for (const int i : *largest) quad.push_back(hull[i]);
+    }
     std::array<cv::Point2d, 4> corners;
     for (int i = 0; i < 4; ++i) corners[i] = frame.to_frame(cv::Point2d(quad[i]));
     // Clockwise on screen (y down): positive shoelace sum.
