@@ -600,28 +600,39 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     for (; hierarchy[i][3] >= 0; i = hierarchy[i][3]) ++d;
     return d;
   };
-  std::vector<std::pair<double, std::vector<cv::Point>>> hulls;  // area, hull
-  std::vector<cv::Point> points;
+  // Per group: the area of its hull, its hull and, where pieces were left out (below), the
+  // hull of the rest.
+  std::vector<std::pair<double, std::vector<std::vector<cv::Point>>>> groups;
+  std::vector<cv::Point> points, near_points;
   for (int i = 0; i < int(contours.size()); ++i) {
     // Outer boundaries of black pieces are at even depths; visit each parent's group once.
     if (depth(i) % 2 != 0 || hierarchy[i][1] >= 0) continue;
-    // The group grows from its largest piece by the pieces near it: a speck of the margin
-    // or of the ground further off would pull a corner of the hull out.
     std::vector<int> pieces;
     std::vector<cv::Rect> boxes;
+    points.clear();
     for (int j = i; j >= 0; j = hierarchy[j][0]) {
       const cv::Rect r = cv::boundingRect(contours[j]);
       if ((r & inner) != r) continue;
       pieces.push_back(j), boxes.push_back(r);
+      points.insert(points.end(), contours[j].begin(), contours[j].end());
     }
-    if (pieces.empty()) continue;
+    if (points.size() < 4) continue;
+    std::vector<cv::Point> hull;
+    cv::convexHull(points, hull);
+    auto& group = groups.emplace_back(cv::contourArea(hull), std::vector<std::vector<cv::Point>>{hull});
+    // Also the group grown from its largest piece by the pieces within a tenth of the
+    // group's size: a speck of the margin or of the ground further off pulls a corner of
+    // the whole hull out (while under motion blur the pieces of a marker lie further apart).
     const int largest = int(std::max_element(boxes.begin(), boxes.end(), [](const cv::Rect& a, const cv::Rect& b) {
                               return a.area() < b.area();
                             }) - boxes.begin());
-    const int gap = std::max(4, std::max(boxes[largest].width, boxes[largest].height) / 10);
+    cv::Rect all = boxes[largest];
+    for (const cv::Rect& r : boxes) all |= r;
+    const int gap = std::max(4, std::max(all.width, all.height) / 10);
     std::vector<bool> taken(pieces.size(), false);
     taken[largest] = true;
-    points.assign(contours[pieces[largest]].begin(), contours[pieces[largest]].end());
+    near_points.assign(contours[pieces[largest]].begin(), contours[pieces[largest]].end());
+    std::size_t count = 1;
     for (bool grew = true; grew;) {
       grew = false;
       for (std::size_t a = 0; a < pieces.size(); ++a) {
@@ -630,35 +641,39 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
         for (std::size_t b = 0; b < pieces.size() && !taken[a]; ++b)
           if (taken[b] && (near & boxes[b]).area() > 0) {
             taken[a] = grew = true;
-            points.insert(points.end(), contours[pieces[a]].begin(), contours[pieces[a]].end());
+            ++count;
+            near_points.insert(near_points.end(), contours[pieces[a]].begin(), contours[pieces[a]].end());
           }
       }
     }
-    if (points.size() < 4) continue;
-    std::vector<cv::Point> hull;
-    cv::convexHull(points, hull);
-    hulls.emplace_back(cv::contourArea(hull), std::move(hull));
+    if (count == pieces.size() || near_points.size() < 4) continue;
+    cv::convexHull(near_points, hull);
+    group.second.push_back(hull);
   }
-  std::sort(hulls.begin(), hulls.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::sort(groups.begin(), groups.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
   std::vector<std::array<cv::Point2d, 4>> out;
-  for (const auto& [area, hull] : hulls) {
-    if (out.size() == 3 || area < 16) break;
-    std::vector<cv::Point> quad;
-    const double perimeter = cv::arcLength(hull, true);
-    for (double f = 0.02; f <= 0.2 && quad.size() != 4; f += 0.02) cv::approxPolyDP(hull, quad, f * perimeter, true);
-    if (quad.size() != 4 || !cv::isContourConvex(quad)) {
-      // Rounded corners can take the approximation from five vertices to three: the
-      // hull's largest quadrilateral instead.
-      const std::optional<std::array<int, 4>> largest = largest_quad(std::vector<cv::Point2d>(hull.begin(), hull.end()));
-      if (!largest) continue;
-      quad.clear();
-      for (const int i : *largest) quad.push_back(hull[i]);
+  int kept = 0;
+  for (const auto& [group_area, hulls] : groups) {
+    if (kept == 3 || group_area < 16) break;
+    ++kept;
+    for (const std::vector<cv::Point>& hull : hulls) {
+      std::vector<cv::Point> quad;
+      const double perimeter = cv::arcLength(hull, true);
+      for (double f = 0.02; f <= 0.2 && quad.size() != 4; f += 0.02) cv::approxPolyDP(hull, quad, f * perimeter, true);
+      if (quad.size() != 4 || !cv::isContourConvex(quad)) {
+        // Rounded corners can take the approximation from five vertices to three: the
+        // hull's largest quadrilateral instead.
+        const std::optional<std::array<int, 4>> largest = largest_quad(std::vector<cv::Point2d>(hull.begin(), hull.end()));
+        if (!largest) continue;
+        quad.clear();
+        for (const int i : *largest) quad.push_back(hull[i]);
+      }
+      std::array<cv::Point2d, 4> corners;
+      for (int i = 0; i < 4; ++i) corners[i] = frame.to_frame(cv::Point2d(quad[i]));
+      // Clockwise on screen (y down): positive shoelace sum.
+      if (quad_area(corners) < 0) std::reverse(corners.begin(), corners.end());
+      out.push_back(corners);
     }
-    std::array<cv::Point2d, 4> corners;
-    for (int i = 0; i < 4; ++i) corners[i] = frame.to_frame(cv::Point2d(quad[i]));
-    // Clockwise on screen (y down): positive shoelace sum.
-    if (quad_area(corners) < 0) std::reverse(corners.begin(), corners.end());
-    out.push_back(corners);
   }
   return out;
 }

@@ -7,6 +7,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "lftag/render.hpp"
+#include "../../src/core/geometry.hpp"
+#include "binary.hpp"
 #include "scenes.hpp"
 #include "stages.hpp"
 
@@ -268,4 +270,49 @@ TEST(CoarseOutlines, FindsTheMarkerInsideARingOfBackground) {
     EXPECT_GT(twice_area, 0);
   }
   EXPECT_TRUE(marker);
+}
+
+TEST(CoarseOutlines, LeavesOutASpeckBesideTheMarker) {
+  // A marker's border turned 30 degrees with rounded corners, a speck of the margin a
+  // little off one side: one outline is the border's, within a few pixels of its corners.
+  cv::Mat1b black(140, 140, std::uint8_t(0));
+  const cv::RotatedRect border({70, 70}, {70, 70}, 30);
+  cv::Point2f corners[4];
+  border.points(corners);
+  std::vector<cv::Point> outer(corners, corners + 4);
+  cv::fillConvexPoly(black, outer, 255);
+  cv::polylines(black, outer, true, 255, 5);  // rounds the corners
+  cv::Point2f inside[4];
+  cv::RotatedRect({70, 70}, {56, 56}, 30).points(inside);
+  cv::fillConvexPoly(black, std::vector<cv::Point>(inside, inside + 4), 0);
+  black(cv::Rect(60, 4, 6, 3)).setTo(255);  // the speck, 13 px above the top corner
+  const BinaryImage binary = test::binary_from_mask(black);
+  PatchFrame frame;  // the frame's own pixels
+  const auto outlines = coarse_outlines(binary, frame);
+  ASSERT_FALSE(outlines.empty());
+  double best = 1e9;  // the farthest corner from the border's, of the closest outline
+  for (const auto& o : outlines) {
+    double worst = 0;
+    for (const cv::Point2f& c : corners) {
+      double nearest = 1e9;
+      for (const cv::Point2d& q : o) nearest = std::min(nearest, cv::norm(q - cv::Point2d(c)));
+      worst = std::max(worst, nearest);
+    }
+    best = std::min(best, worst);
+  }
+  EXPECT_LT(best, 4.0) << "no outline near the border's corners: " << corners[0] << corners[1] << corners[2] << corners[3] << " outlines " << outlines.size() << " first " << outlines[0][0] << outlines[0][1] << outlines[0][2] << outlines[0][3];
+}
+
+TEST(CoarseOutlines, TakesTheLargestQuadrilateralWhereTheApproximationSkipsFour) {
+  // The hull of a defocused marker's pieces in a video frame, whose polygon approximation
+  // goes from five vertices to three: its largest quadrilateral is the outline.
+  const std::vector<cv::Point> hull = {{100, 82}, {74, 111}, {39, 96}, {37, 95}, {36, 94}, {35, 92},
+                                       {29, 72},  {21, 40},  {21, 36}, {23, 33}, {36, 29}, {73, 21},
+                                       {84, 21},  {90, 37},  {94, 49}, {100, 75}};
+  cv::Mat1b black(130, 130, std::uint8_t(0));
+  cv::fillConvexPoly(black, hull, 255);
+  PatchFrame frame;
+  const auto outlines = coarse_outlines(test::binary_from_mask(black), frame);
+  ASSERT_EQ(outlines.size(), 1u);
+  EXPECT_GT(quad_area(outlines[0]), 0.75 * cv::contourArea(hull)) << "clockwise, and most of the hull";
 }
