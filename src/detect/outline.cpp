@@ -600,10 +600,8 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     for (; hierarchy[i][3] >= 0; i = hierarchy[i][3]) ++d;
     return d;
   };
-  // Per group: the area of its hull, its hull and, where pieces were left out (below), the
-  // hull of the rest.
-  std::vector<std::pair<double, std::vector<std::vector<cv::Point>>>> groups;
-  std::vector<cv::Point> points, near_points;
+  std::vector<std::pair<double, std::vector<cv::Point>>> hulls;  // area, hull
+  std::vector<cv::Point> points;
   for (int i = 0; i < int(contours.size()); ++i) {
     // Outer boundaries of black pieces are at even depths; visit each parent's group once.
     if (depth(i) % 2 != 0 || hierarchy[i][1] >= 0) continue;
@@ -617,12 +615,10 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
       points.insert(points.end(), contours[j].begin(), contours[j].end());
     }
     if (points.size() < 4) continue;
-    std::vector<cv::Point> hull;
-    cv::convexHull(points, hull);
-    auto& group = groups.emplace_back(cv::contourArea(hull), std::vector<std::vector<cv::Point>>{hull});
-    // Also the group grown from its largest piece by the pieces within a tenth of the
-    // group's size: a speck of the margin or of the ground further off pulls a corner of
-    // the whole hull out (while under motion blur the pieces of a marker lie further apart).
+    // The group grown from its largest piece by the pieces within a tenth of the group's
+    // size: a speck of the margin or of the ground further off would pull a corner of the
+    // hull out. Only specks are left out: under motion blur a marker's own pieces lie
+    // further apart, and they hold much of its ink.
     const int largest = int(std::max_element(boxes.begin(), boxes.end(), [](const cv::Rect& a, const cv::Rect& b) {
                               return a.area() < b.area();
                             }) - boxes.begin());
@@ -631,49 +627,46 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     const int gap = std::max(4, std::max(all.width, all.height) / 10);
     std::vector<bool> taken(pieces.size(), false);
     taken[largest] = true;
-    near_points.assign(contours[pieces[largest]].begin(), contours[pieces[largest]].end());
-    std::size_t count = 1;
     for (bool grew = true; grew;) {
       grew = false;
       for (std::size_t a = 0; a < pieces.size(); ++a) {
         if (taken[a]) continue;
         const cv::Rect near(boxes[a].x - gap, boxes[a].y - gap, boxes[a].width + 2 * gap, boxes[a].height + 2 * gap);
         for (std::size_t b = 0; b < pieces.size() && !taken[a]; ++b)
-          if (taken[b] && (near & boxes[b]).area() > 0) {
-            taken[a] = grew = true;
-            ++count;
-            near_points.insert(near_points.end(), contours[pieces[a]].begin(), contours[pieces[a]].end());
-          }
+          if (taken[b] && (near & boxes[b]).area() > 0) taken[a] = grew = true;
       }
     }
-    if (count == pieces.size() || near_points.size() < 4) continue;
-    cv::convexHull(near_points, hull);
-    group.second.push_back(hull);
+    double ink = 0, left_out = 0;
+    for (std::size_t a = 0; a < pieces.size(); ++a) (taken[a] ? ink : left_out) += boxes[a].area();
+    if (left_out > 0 && left_out <= 0.1 * (ink + left_out)) {
+      points.clear();
+      for (std::size_t a = 0; a < pieces.size(); ++a)
+        if (taken[a]) points.insert(points.end(), contours[pieces[a]].begin(), contours[pieces[a]].end());
+    }
+    std::vector<cv::Point> hull;
+    cv::convexHull(points, hull);
+    hulls.emplace_back(cv::contourArea(hull), std::move(hull));
   }
-  std::sort(groups.begin(), groups.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::sort(hulls.begin(), hulls.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
   std::vector<std::array<cv::Point2d, 4>> out;
-  int kept = 0;
-  for (const auto& [group_area, hulls] : groups) {
-    if (kept == 3 || group_area < 16) break;
-    ++kept;
-    for (const std::vector<cv::Point>& hull : hulls) {
-      std::vector<cv::Point> quad;
-      const double perimeter = cv::arcLength(hull, true);
-      for (double f = 0.02; f <= 0.2 && quad.size() != 4; f += 0.02) cv::approxPolyDP(hull, quad, f * perimeter, true);
-      if (quad.size() != 4 || !cv::isContourConvex(quad)) {
-        // Rounded corners can take the approximation from five vertices to three: the
-        // hull's largest quadrilateral instead.
-        const std::optional<std::array<int, 4>> largest = largest_quad(std::vector<cv::Point2d>(hull.begin(), hull.end()));
-        if (!largest) continue;
-        quad.clear();
-        for (const int i : *largest) quad.push_back(hull[i]);
-      }
-      std::array<cv::Point2d, 4> corners;
-      for (int i = 0; i < 4; ++i) corners[i] = frame.to_frame(cv::Point2d(quad[i]));
-      // Clockwise on screen (y down): positive shoelace sum.
-      if (quad_area(corners) < 0) std::reverse(corners.begin(), corners.end());
-      out.push_back(corners);
+  for (const auto& [area, hull] : hulls) {
+    if (out.size() == 3 || area < 16) break;
+    std::vector<cv::Point> quad;
+    const double perimeter = cv::arcLength(hull, true);
+    for (double f = 0.02; f <= 0.2 && quad.size() != 4; f += 0.02) cv::approxPolyDP(hull, quad, f * perimeter, true);
+    if (quad.size() != 4 || !cv::isContourConvex(quad)) {
+      // Rounded corners can take the approximation from five vertices to three: the
+      // hull's largest quadrilateral instead.
+      const std::optional<std::array<int, 4>> largest = largest_quad(std::vector<cv::Point2d>(hull.begin(), hull.end()));
+      if (!largest) continue;
+      quad.clear();
+      for (const int i : *largest) quad.push_back(hull[i]);
     }
+    std::array<cv::Point2d, 4> corners;
+    for (int i = 0; i < 4; ++i) corners[i] = frame.to_frame(cv::Point2d(quad[i]));
+    // Clockwise on screen (y down): positive shoelace sum.
+    if (quad_area(corners) < 0) std::reverse(corners.begin(), corners.end());
+    out.push_back(corners);
   }
   return out;
 }

@@ -193,9 +193,8 @@ void binarise_patch(const Patch& patch, double level, BinaryImage& out);
 
 // ---------------------------------------------------------------- outline.cpp
 // The quadrilateral outlines of the largest groups of black pieces of a patch's binary
-// image that lie in one white region clear of the patch's edge (at most three groups, the
-// largest first; each also without its pieces far from the rest, where it has such), in
-// frame pixels, clockwise on screen.
+// image that lie in one white region clear of the patch's edge, without specks far from
+// the rest (at most three, the largest first), in frame pixels, clockwise on screen.
 std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binary, const PatchFrame& frame);
 
 // A marker read from the grey levels under its aligned outline.
