@@ -205,20 +205,27 @@ TEST(Cli, DetectStatsAndDebugImages) {
     EXPECT_FALSE(cv::imread(dir + "/det_stats-" + stage + ".png").empty()) << stage;
 }
 
+// `lftag detect --why --stats --family 3x3` of a scene rendered on a 6-unit margin into
+// `image`: its one line of JSON (empty when it is not one line).
+nlohmann::json detect_why(const std::string& scene_json, const std::string& image) {
+  const std::string scene = image + ".json";
+  std::ofstream(scene) << scene_json;
+  EXPECT_EQ(run("render --margin 6 --scene " + scene + " --output " + image).status, 0);
+  const CliResult r = run("detect --why --stats --family 3x3 " + image);
+  EXPECT_EQ(r.status, 0) << r.output;
+  const auto lines = json_lines(r.output);
+  EXPECT_EQ(lines.size(), 1u) << r.output;
+  return lines.size() == 1 ? lines[0] : nlohmann::json::object();
+}
+
 TEST(Cli, DetectWhyNamesTheStageThatStoppedEachCandidate) {
   // A far 3x3 (13 px) on a white margin, found by the second look, beside a steeply
   // tilted one: --why lists every candidate with its stage.
-  const std::string img = kTmp + "/why.png", scene = kTmp + "/why-scene.json";
-  std::ofstream(scene) << R"({"markers": [
+  const std::string img = kTmp + "/why.png";
+  const nlohmann::json o = detect_why(R"({"markers": [
     {"family": "3x3", "id": 6789, "tag_size": 1, "tvec": [-6, 0, 26], "roll": 45},
-    {"family": "3x3", "id": 12345, "tag_size": 1, "tvec": [1, 0, 3], "tilt": 86}]})";
-  ASSERT_EQ(run("render --margin 6 --scene " + scene + " --output " + img).status, 0);
-  const CliResult r = run("detect --why --stats --family 3x3 " + img);
-  ASSERT_EQ(r.status, 0) << r.output;
-  const auto lines = json_lines(r.output);
-  ASSERT_EQ(lines.size(), 1u) << r.output;
-  const auto& o = lines[0];
-  ASSERT_EQ(o["detections"].size(), 1u) << r.output;
+    {"family": "3x3", "id": 12345, "tag_size": 1, "tvec": [1, 0, 3], "tilt": 86}]})", img);
+  ASSERT_EQ(o["detections"].size(), 1u) << o;
   EXPECT_EQ(o["detections"][0]["id"], 6789);
   EXPECT_GE(o["stats"]["funnel"]["second_looks"].get<int>(), 1);
   EXPECT_EQ(o["stats"]["funnel"]["second_look_found"], 1);
@@ -243,15 +250,10 @@ TEST(Cli, DetectWhyListsTheOutlineReads) {
   // A 3x3 at 29 m (11 px) on a white margin, whose squares no binary image separates: no
   // candidate, but --why lists the outline reads of its second look, the one that found
   // it with its reading, and the stage that stopped the others.
-  const std::string img = kTmp + "/why-outline.png", scene = kTmp + "/why-outline.json";
-  std::ofstream(scene) << R"({"markers": [{"family": "3x3", "id": 6789, "tag_size": 1, "tvec": [-6, 0, 29], "roll": 30}]})";
-  ASSERT_EQ(run("render --margin 6 --scene " + scene + " --output " + img).status, 0);
-  const CliResult r = run("detect --why --stats --family 3x3 " + img);
-  ASSERT_EQ(r.status, 0) << r.output;
-  const auto lines = json_lines(r.output);
-  ASSERT_EQ(lines.size(), 1u) << r.output;
-  const auto& o = lines[0];
-  ASSERT_EQ(o["detections"].size(), 1u) << r.output;
+  const std::string img = kTmp + "/why-outline.png";
+  const nlohmann::json o =
+      detect_why(R"({"markers": [{"family": "3x3", "id": 6789, "tag_size": 1, "tvec": [-6, 0, 29], "roll": 30}]})", img);
+  ASSERT_EQ(o["detections"].size(), 1u) << o;
   EXPECT_EQ(o["detections"][0]["id"], 6789);
   EXPECT_TRUE(o["detections"][0]["from_outline"].get<bool>());
   ASSERT_EQ(o["outline_reads"].size(), o["stats"]["funnel"]["outline_reads"].get<std::size_t>());
