@@ -213,12 +213,13 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
       }
       --reads_left;
       ++stats.outline_reads;
-      const std::optional<detail::OutlineReading> reading = detail::read_outline(work, outline, f);
+      const std::optional<detail::OutlineReading> reading =
+          detail::read_outline(work, outline, f, p.min_pixels_per_unit);
       const Stage stage = reading ? detail::outline_stage(*reading, p) : Stage::alignment;
       if (verdict) {
         verdict->stage = stage;
         if (reading) {
-          if (stage >= Stage::resolution) verdict->reading = reading->id;  // the cells were read
+          if (reading->read) verdict->reading = reading->id;
           verdict->correlation = reading->correlation, verdict->marker_correlation = reading->marker_correlation;
           verdict->contrast = reading->contrast, verdict->margin = reading->margin;
           verdict->pixels_per_unit = reading->pixels_per_unit, verdict->smear = reading->smear;

@@ -199,6 +199,7 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
 
 // A marker read from the grey levels under its aligned outline.
 struct OutlineReading {
+  bool read = false;             // the cells were read: `id` holds the reading
   TagId id;
   cv::Matx33d homography;        // units -> frame pixels (as observed), in the marker's true turn
   double correlation = 0;        // of the marker's fixed structure with the image (ECC)
@@ -215,8 +216,11 @@ struct OutlineReading {
 
 // Aligns the fixed structure of `family` to the image from `outline` (its outer corners,
 // clockwise on screen, from any of them) and reads the id; none when the alignment fails.
+// A start well under `min_pixels_per_unit` is not aligned: the reading returned has only
+// its correlation and pixels per unit, which fail the checks.
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& outline,
-                                           const Family& family);
+                                           const Family& family,
+                                           double min_pixels_per_unit = DetectorParams{}.min_pixels_per_unit);
 
 // The checks an outline reading must pass to be a detection, each scale-free.
 constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it

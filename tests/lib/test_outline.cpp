@@ -239,6 +239,16 @@ TEST(OutlineReading, MarkersBelowTheReadableResolutionAreRefused) {
   ASSERT_TRUE(reading);
   EXPECT_LT(reading->pixels_per_unit, params.min_pixels_per_unit);
   EXPECT_FALSE(acceptable(*reading, params));
+  EXPECT_EQ(outline_stage(*reading, params), Stage::resolution);
+
+  // At 50 m (0.27 px per unit) the start is far under the bound: refused before the
+  // alignment, nothing read.
+  const Far farther = far_marker(3, 777, 50, 20);
+  const auto early = read_outline(ImageView(farther.scene.image), coarse(farther.corners, 0, 0.3, rng), Family(3));
+  ASSERT_TRUE(early);
+  EXPECT_LT(early->pixels_per_unit, 0.8 * params.min_pixels_per_unit);
+  EXPECT_FALSE(early->read);
+  EXPECT_EQ(outline_stage(*early, params), Stage::resolution);
 }
 
 TEST(CoarseOutlines, FindsTheMarkerInsideARingOfBackground) {
