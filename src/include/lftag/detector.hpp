@@ -239,7 +239,9 @@ struct OutlineVerdict {
   std::array<cv::Point2d, 4> outline{};  // the coarse outline read from, frame pixels
   Stage stage = Stage::detected;
   std::optional<TagId> reading;          // the id read, when reading ran
-  double correlation = 0;                // of the aligned structure (0 when it did not align)
+  double correlation = 0;                // of the aligned structure (of the start when one
+                                         // far under the resolution bound was not aligned;
+                                         // 0 when it did not align)
   double marker_correlation = 0;         // of the whole marker of the id read
   double contrast = 0;                   // white ring minus the cells' cores, grey levels
   double margin = 0;                     // how much worse each cell's runner-up fits (least)
