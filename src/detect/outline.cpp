@@ -617,8 +617,9 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     if (points.size() < 4) continue;
     // The group grown from its largest piece by the pieces within a tenth of the group's
     // size: a speck of the margin or of the ground further off would pull a corner of the
-    // hull out. Only specks are left out: under motion blur a marker's own pieces lie
-    // further apart, and they hold much of its ink.
+    // hull out. Only specks are left out (at most a tenth of the group by the area of
+    // their boxes): under motion blur a marker's own pieces lie further apart, and they
+    // are much of it.
     const int largest = int(std::max_element(boxes.begin(), boxes.end(), [](const cv::Rect& a, const cv::Rect& b) {
                               return a.area() < b.area();
                             }) - boxes.begin());

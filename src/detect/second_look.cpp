@@ -116,23 +116,28 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
   }
 
   std::vector<std::pair<double, cv::Rect>> found;  // ring ink, box
+  // A marker's size, a square seen at up to about 70 degrees.
+  const auto marker_sized = [&](int w, int h) {
+    return std::max(w, h) >= look.min_size && std::max(w, h) <= look.max_size && std::max(w, h) <= 3 * std::min(w, h);
+  };
+  const auto overlaps_any = [](const cv::Rect& box, const std::vector<cv::Rect>& boxes) {
+    return std::any_of(boxes.begin(), boxes.end(), [&](const cv::Rect& t) { return (t & box).area() > 0; });
+  };
   for (std::size_t i = 0; i < small.size(); ++i) {
     if (find_root(parent, int(i)) != int(i)) continue;
     const Cluster& c = clusters[i];
     const int w = c.x1 - c.x0 + 1, h = c.y1 - c.y0 + 1;
-    // A marker's size, a square seen at up to about 70 degrees, about half ink (0.42 to
-    // 0.68 measured from 13 px to blurred 70 px markers), broken into pieces or holed by
-    // its gaps (at least 5 measured; one piece or a ring is a blob or a letter), and alone
-    // on its white margin. Of the clusters in photos, about 2 in 1,000 pass.
-    if (std::max(w, h) < look.min_size || std::max(w, h) > look.max_size) continue;
-    if (std::max(w, h) > 3 * std::min(w, h)) continue;
+    // A marker's size, about half ink (0.42 to 0.68 measured from 13 px to blurred 70 px
+    // markers), broken into pieces or holed by its gaps (at least 5 measured; one piece
+    // or a ring is a blob or a letter), and alone on its white margin. Of the clusters in
+    // photos, about 2 in 1,000 pass.
+    if (!marker_sized(w, h)) continue;
     const double fill = double(c.ink) / (w * h);
     if (fill < 0.35 || fill > 0.8 || c.pieces < 4) continue;
     const double ring = ring_ink(binary, c);
     if (ring > 0.25) continue;
     const cv::Rect box(c.x0, c.y0, w, h);
-    if (std::any_of(taken.begin(), taken.end(), [&](const cv::Rect& t) { return (t & box).area() > 0; })) continue;
-    found.emplace_back(ring, box);
+    if (!overlaps_any(box, taken)) found.emplace_back(ring, box);
   }
   // A marker's border closed around a white hole that holds some of its squares, the
   // others joined to the border: its cluster can take in the background's dark specks
@@ -142,8 +147,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const Region& g = tree.regions[r];
     if (!g.black || g.child_count == 0) continue;
     const int w = g.x1 - g.x0 + 1, h = g.y1 - g.y0 + 1;
-    if (std::max(w, h) < look.min_size || std::max(w, h) > look.max_size || std::max(w, h) > 3 * std::min(w, h))
-      continue;
+    if (!marker_sized(w, h)) continue;
     // Its largest hole with what the hole holds: the marker inside its border.
     int hole = -1;
     for (int i = 0; i < g.child_count; ++i)
@@ -158,9 +162,8 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const double hole_fill = double(inside) / (w * h);
     if (squares < 2 || hole_fill < 0.2 || hole_fill > 0.8) continue;
     const cv::Rect box(g.x0, g.y0, w, h);
-    const auto overlaps = [&](const cv::Rect& t) { return (t & box).area() > 0; };
-    if (std::any_of(taken.begin(), taken.end(), overlaps) ||
-        std::any_of(found.begin(), found.end(), [&](const auto& f) { return overlaps(f.second); }))
+    if (overlaps_any(box, taken) ||
+        std::any_of(found.begin(), found.end(), [&](const auto& f) { return (f.second & box).area() > 0; }))
       continue;
     const double ring = hull_ring_ink(tree, binary, r);
     if (ring <= 0.25) found.emplace_back(ring, box);
