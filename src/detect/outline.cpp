@@ -373,6 +373,10 @@ class PixelModel {
       cv::Rect r = cv::boundingRect(reach);
       r = cv::Rect(r.x - box_.x - pad, r.y - box_.y - pad, r.width + 2 * pad, r.height + 2 * pad) &
           cv::Rect(cv::Point(), box_.size());
+      if (r.empty()) {  // the cell lies wholly outside the frame: nothing of it to read
+        grey_.release();
+        return;
+      }
       std::array<Coverage, 4>& squares = squares_.emplace_back();
       for (Coverage& c : squares) c.rect = r, c.share = cv::Mat1f::zeros(r.size());
     }

@@ -326,3 +326,34 @@ TEST(CoarseOutlines, TakesTheLargestQuadrilateralWhereTheApproximationSkipsFour)
   ASSERT_EQ(outlines.size(), 1u);
   EXPECT_GT(quad_area(outlines[0]), 0.75 * cv::contourArea(hull)) << "clockwise, and most of the hull";
 }
+
+TEST(OutlineReading, AMarkerCutByTheFrameEdgeIsReadOnlyWhereItsSquaresAreSeen) {
+  // A far 3x3 (one pixel per unit, 24 px) whose outline reaches past the frame's right or
+  // bottom edge, cut anywhere from a quarter to three quarters of its side. Where a row or
+  // column of squares (units 4 to 20 of 24) lies wholly beyond the edge, nothing can read
+  // it: the reading is refused, without error. Where part of every square is seen, an
+  // accepted reading must be the right one.
+  DetectorParams params;
+  const Family family(3);
+  const TagId id = 4321;
+  const cv::Mat1b marker = rasterize_marker(family, id, 1.0, 0);
+  ASSERT_EQ(marker.cols, family.side());
+  cv::Mat1b sheet(marker.rows + 40, marker.cols + 40, std::uint8_t(235));
+  marker.copyTo(sheet(cv::Rect(20, 20, marker.cols, marker.rows)));
+  const double s = family.side();
+  const std::array<cv::Point2d, 4> outline = {cv::Point2d(19.5, 19.5), {19.5 + s, 19.5}, {19.5 + s, 19.5 + s},
+                                              {19.5, 19.5 + s}};
+  for (int cut = family.side() / 4; cut <= 3 * family.side() / 4; ++cut)
+    for (const bool across : {false, true}) {
+      const cv::Mat1b frame = across ? sheet(cv::Rect(0, 0, 20 + cut, sheet.rows)).clone()
+                                     : sheet(cv::Rect(0, 0, sheet.cols, 20 + cut)).clone();
+      std::optional<OutlineReading> reading;
+      ASSERT_NO_THROW(reading = read_outline(ImageView(frame), outline, family)) << cut;
+      const bool accepted = reading && acceptable(*reading, params);
+      if (cut <= 16) {
+        EXPECT_FALSE(accepted) << cut;
+      } else if (accepted) {
+        EXPECT_EQ(reading->id, id) << cut;
+      }
+    }
+}
