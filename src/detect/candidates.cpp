@@ -1,7 +1,6 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // Topological filtering (paper IV-B), vertex estimation (IV-C) and the area constraint.
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <numeric>
 
