@@ -604,8 +604,18 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     for (; hierarchy[i][3] >= 0; i = hierarchy[i][3]) ++d;
     return d;
   };
-  std::vector<std::pair<double, std::vector<cv::Point>>> hulls;  // area, hull
+  std::vector<std::pair<double, std::vector<cv::Point>>> hulls, rings;  // area, hull
   std::vector<cv::Point> points;
+  // Whether piece j is closed around a hole that holds two or more pieces: a marker's
+  // border around its squares.
+  const auto closed_around_pieces = [&](int j) {
+    for (int hole = hierarchy[j][2]; hole >= 0; hole = hierarchy[hole][0]) {
+      int held = 0;
+      for (int k = hierarchy[hole][2]; k >= 0 && held < 2; k = hierarchy[k][0]) ++held;
+      if (held >= 2) return true;
+    }
+    return false;
+  };
   for (int i = 0; i < int(contours.size()); ++i) {
     // Outer boundaries of black pieces are at even depths; visit each parent's group once.
     if (depth(i) % 2 != 0 || hierarchy[i][1] >= 0) continue;
@@ -619,6 +629,16 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
       points.insert(points.end(), contours[j].begin(), contours[j].end());
     }
     if (points.size() < 4) continue;
+    // A border closed around squares is also tried alone: a margin's edge beside it (the
+    // ground seen through the local threshold, open where the sheet meets the patch's
+    // bright surroundings) would otherwise be its group and hide it.
+    if (pieces.size() > 1)
+      for (const int j : pieces)
+        if (closed_around_pieces(j)) {
+          std::vector<cv::Point> hull;
+          cv::convexHull(contours[j], hull);
+          rings.emplace_back(cv::contourArea(hull), std::move(hull));
+        }
     // The group grown from its largest piece by the pieces within a tenth of the group's
     // size: a speck of the margin or of the ground further off would pull a corner of the
     // hull out. Only specks are left out (at most a tenth of the group by the area of
@@ -652,10 +672,15 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     cv::convexHull(points, hull);
     hulls.emplace_back(cv::contourArea(hull), std::move(hull));
   }
-  std::sort(hulls.begin(), hulls.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  // The groups largest first, then the borders tried alone.
+  const auto larger = [](const auto& a, const auto& b) { return a.first > b.first; };
+  std::sort(hulls.begin(), hulls.end(), larger);
+  std::sort(rings.begin(), rings.end(), larger);
+  hulls.insert(hulls.end(), std::make_move_iterator(rings.begin()), std::make_move_iterator(rings.end()));
   std::vector<std::array<cv::Point2d, 4>> out;
   for (const auto& [area, hull] : hulls) {
-    if (out.size() == 3 || area < 16) break;
+    if (out.size() == 3) break;
+    if (area < 16) continue;
     std::vector<cv::Point> quad;
     const double perimeter = cv::arcLength(hull, true);
     for (double f = 0.02; f <= 0.2 && quad.size() != 4; f += 0.02) cv::approxPolyDP(hull, quad, f * perimeter, true);

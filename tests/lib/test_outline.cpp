@@ -327,6 +327,34 @@ TEST(CoarseOutlines, TakesTheLargestQuadrilateralWhereTheApproximationSkipsFour)
   EXPECT_GT(quad_area(outlines[0]), 0.75 * cv::contourArea(hull)) << "clockwise, and most of the hull";
 }
 
+TEST(CoarseOutlines, TriesABorderAroundSquaresAloneBesideTheGroundsEdge) {
+  // A far marker's patch as binarised at 27 m: the ground's edge beside the sheet is a
+  // black band open on one side (so the sheet's white joins the patch's), and the
+  // marker's border a closed ring around its squares inside the band's box. The two are
+  // one group whose hull is the band's; the ring is also tried alone.
+  cv::Mat1b black(96, 96, std::uint8_t(0));
+  cv::rectangle(black, cv::Rect(14, 21, 63, 56), 255, 7);
+  black(cv::Rect(30, 70, 30, 12)).setTo(0);  // the band's opening
+  const cv::Rect ring(34, 35, 26, 26);
+  cv::rectangle(black, ring, 255, 2);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) black(cv::Rect(39 + 6 * c, 40 + 6 * r, 3, 3)).setTo(255);
+  PatchFrame frame;  // the frame's own pixels
+  const auto outlines = coarse_outlines(test::binary_from_mask(black), frame);
+  const std::array<cv::Point2d, 4> corners = {cv::Point2d(34, 35), {59, 35}, {59, 60}, {34, 60}};
+  bool found = false;
+  for (const auto& o : outlines) {
+    double worst = 0;
+    for (const cv::Point2d& c : corners) {
+      double nearest = 1e9;
+      for (const cv::Point2d& q : o) nearest = std::min(nearest, cv::norm(q - c));
+      worst = std::max(worst, nearest);
+    }
+    found |= worst < 1.5;
+  }
+  EXPECT_TRUE(found) << outlines.size() << " outlines";
+}
+
 TEST(OutlineReading, AMarkerCutByTheFrameEdgeIsReadOnlyWhereItsSquaresAreSeen) {
   // A far 3x3 (one pixel per unit, 24 px) whose outline reaches past the frame's right or
   // bottom edge, cut anywhere from a quarter to three quarters of its side. Where a row or
