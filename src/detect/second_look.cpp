@@ -160,14 +160,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
       squares += k.area >= 2;
     }
     const double hole_fill = double(inside) / (w * h);
-    const bool around_squares = squares >= 2 && hole_fill >= 0.2 && hole_fill <= 0.8;
-    // Or, under a long motion blur, the squares smeared into the border: its hole is
-    // the gaps between them, spanning most of the border's box but filling little of its
-    // own (a frame around a plain hole fills nearly all of it).
-    const int hw = white.x1 - white.x0 + 1, hh = white.y1 - white.y0 + 1;
-    const bool smeared = !around_squares && hole_fill >= 0.2 && hole_fill <= 0.8 && hw >= 0.6 * w &&
-                         hh >= 0.6 * h && white.area <= 0.6 * hw * hh;
-    if (!around_squares && !smeared) continue;
+    if (squares < 2 || hole_fill < 0.2 || hole_fill > 0.8) continue;
     const cv::Rect box(g.x0, g.y0, w, h);
     if (overlaps_any(box, taken) ||
         std::any_of(found.begin(), found.end(), [&](const auto& f) { return (f.second & box).area() > 0; }))
