@@ -72,6 +72,25 @@ double hull_ring_ink(const RegionTree& tree, const BinaryImage& binary, int r) {
   return count ? double(black) / count : 1.0;
 }
 
+// Whether white region `hole` runs along two opposite sides of its box: on at least four
+// fifths of its rows it reaches both its left and its right edge (within a thirtieth of
+// its size), or so on its columns with its top and bottom edge. A marker's white ring
+// does that beside a border whose squares a motion blur smeared into it.
+bool lines_opposite_sides(const RegionTree& tree, int hole) {
+  const Region& g = tree.regions[hole];
+  const int w = g.x1 - g.x0 + 1, h = g.y1 - g.y0 + 1;
+  const int tol = std::max(1, std::max(w, h) / 30);
+  std::vector<int> row_lo(h, g.x1), row_hi(h, g.x0), col_lo(w, g.y1), col_hi(w, g.y0);
+  tree.for_each_run(hole, [&](int y, int x0, int x1) {
+    row_lo[y - g.y0] = std::min(row_lo[y - g.y0], x0), row_hi[y - g.y0] = std::max(row_hi[y - g.y0], x1 - 1);
+    for (int x = x0; x < x1; ++x) col_lo[x - g.x0] = std::min(col_lo[x - g.x0], y), col_hi[x - g.x0] = std::max(col_hi[x - g.x0], y);
+  });
+  int rows = 0, cols = 0;
+  for (int y = 0; y < h; ++y) rows += row_lo[y] <= g.x0 + tol && row_hi[y] >= g.x1 - tol;
+  for (int x = 0; x < w; ++x) cols += col_lo[x] <= g.y0 + tol && col_hi[x] >= g.y1 - tol;
+  return rows >= 0.8 * h || cols >= 0.8 * w;
+}
+
 }  // namespace
 
 std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const SecondLook& look,
@@ -160,7 +179,15 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
       squares += k.area >= 2;
     }
     const double hole_fill = double(inside) / (w * h);
-    if (squares < 2 || hole_fill < 0.2 || hole_fill > 0.8) continue;
+    if (hole_fill < 0.2 || hole_fill > 0.8) continue;
+    // Or, under a long motion blur, a border with every column of squares smeared into
+    // it: its hole holds nothing and is the gaps, spanning most of the border's box but
+    // filling little of its own (a frame around a plain hole fills it), and the white
+    // ring's two sides along the blur still line the border.
+    const int hw = white.x1 - white.x0 + 1, hh = white.y1 - white.y0 + 1;
+    const bool smeared = squares == 0 && white.child_count == 0 && hw >= 0.6 * w && hh >= 0.6 * h &&
+                         white.area <= 0.6 * hw * hh && lines_opposite_sides(tree, hole);
+    if (squares < 2 && !smeared) continue;
     const cv::Rect box(g.x0, g.y0, w, h);
     if (overlaps_any(box, taken) ||
         std::any_of(found.begin(), found.end(), [&](const auto& f) { return (f.second & box).area() > 0; }))

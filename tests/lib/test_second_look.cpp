@@ -107,6 +107,29 @@ TEST(NearCandidates, AClosedBorderAroundSomeSquaresIsLookedAt) {
   EXPECT_TRUE(clusters_of(ground | black).empty());
 }
 
+TEST(NearCandidates, ABorderWithItsSquaresSmearedIntoItIsLookedAt) {
+  // A marker under a long vertical motion blur: each column of squares smeared into one
+  // strip joined to the top of the border, so the border holds no piece, and its one hole
+  // is the gaps between the strips (joined along the bottom), with the white ring's sides
+  // still lining the border's. The hole spans the border's box but fills little of its
+  // own box: looked at. The same border around a plain hole (a picture frame) is not, nor
+  // is one whose gaps do not line both sides (data cells joined to one side, as in
+  // another family's marker).
+  cv::Mat1b black(110, 100, std::uint8_t(0));
+  const cv::Rect border(20, 20, 61, 67);
+  cv::rectangle(black, border, 255, cv::FILLED);
+  black(cv::Rect(24, 24, 53, 59)).setTo(0);
+  const cv::Mat1b frame = black.clone();
+  for (const int x : {28, 42, 56}) black(cv::Rect(x, 24, 10, 52)).setTo(255);
+  const std::vector<cv::Rect> boxes = clusters_of(black);
+  ASSERT_EQ(boxes.size(), 1u);
+  EXPECT_EQ(boxes[0], border);
+  EXPECT_TRUE(clusters_of(frame).empty());
+  cv::Mat1b one_side = black.clone();
+  one_side(cv::Rect(66, 24, 11, 40)).setTo(255);  // the right gap filled on most rows
+  EXPECT_TRUE(clusters_of(one_side).empty());
+}
+
 TEST(SecondLookPatch, ReopensOnePixelGapsBesideABrightMargin) {
   // A 3x3 marker at 0.55 pixels per unit (13 px across) with a quarter-tag white margin on
   // mid-grey, turned 30 degrees: the frame's 16 px mean threshold joins squares to the
