@@ -65,7 +65,8 @@ TEST(Threshold, BitPackingForWidthsOnAndOffWordBoundaries) {
   const cv::Size sizes[] = {{1, 1}, {3, 2}, {17, 13}, {65, 3}, {640, 480}, {16, 5}, {64, 2}, {127, 4}, {129, 3}};
   for (const cv::Size& s : sizes)
     for (const auto& [window, offset] :
-         {std::pair{16, 0}, std::pair{3, 0}, std::pair{5, 7}, std::pair{32, 2}, std::pair{9, 60}, std::pair{4, 255}}) {
+         {std::pair{16, 0}, std::pair{3, 0}, std::pair{5, 7}, std::pair{32, 2}, std::pair{9, 60}, std::pair{4, 255},
+          std::pair{8, 1}, std::pair{2, 0}, std::pair{17, 0}}) {
       const cv::Mat1b grey = random_grey(s.width, s.height, rng);
       cv::Mat mean;
       BinaryImage b;
@@ -73,6 +74,26 @@ TEST(Threshold, BitPackingForWidthsOnAndOffWordBoundaries) {
       expect_bits(b, reference(grey, window, offset),
                   std::to_string(s.width) + "x" + std::to_string(s.height) + " M=" + std::to_string(window) +
                       " offset=" + std::to_string(offset));
+    }
+}
+
+TEST(Threshold, PowerOfTwoWindowsRoundTheirMeansAsTheBoxFilter) {
+  // Windows of 2, 4, 8 and 16 have a path of their own (16-bit sums): near-white images
+  // bring the sums to their largest (65,280 for 16 x 16), and each level's pixels sit
+  // just below, at and just above the rounded means of windows holding a few darker ones.
+  std::mt19937 rng(13);
+  for (int window : {2, 4, 8, 16})
+    for (int base : {255, 254, 129, 128, 1}) {
+      cv::Mat1b grey(41, 150, uchar(base));
+      std::uniform_int_distribution<int> pick(0, 149), row(0, 40), step(0, 3);
+      for (int k = 0; k < 400; ++k) grey(row(rng), pick(rng)) = uchar(std::max(0, base - step(rng)));
+      for (int offset : {0, 1, 2}) {
+        cv::Mat mean;
+        BinaryImage b;
+        threshold_mean(ImageView(grey), window, offset, mean, b);
+        expect_bits(b, reference(grey, window, offset),
+                    "M=" + std::to_string(window) + " base " + std::to_string(base) + " offset " + std::to_string(offset));
+      }
     }
 }
 
