@@ -308,6 +308,15 @@ void distort(const Camera& camera, std::vector<cv::Point2d>& points);
 // Milliseconds since `start`, for the stage timings.
 double elapsed_ms(std::chrono::steady_clock::time_point start);
 
+// ---------------------------------------------------------------- cell_centroids.cpp
+// The ink centroids of marker `id`'s squares (grid order, image pixels as observed), each
+// over its square grown by half a unit under `homography` (units -> undistorted pixels),
+// the ink weighed against the median grey of the window's ring round the square; empty
+// when the marker has under 1.25 pixels per unit, or a window is not wholly inside the
+// image or holds no ink.
+std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
+                                        const cv::Matx33d& homography);
+
 // ---------------------------------------------------------------- pose.cpp
 // Final pose from all n^2 centroids; fills the pose fields, corners and centre.
 bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,

@@ -1,0 +1,103 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// Cell centroids for the final pose: once the marker is decoded, each square's ink
+// centroid is taken again from the grey image, over a window that the design gives it.
+//
+// The blob centroids that decoding used weigh a square's binary region and the pixels
+// one pixel round it. Under defocus and JPEG a square's ink spreads further than that,
+// and its region, cut by a threshold whose window holds the border's ink on one side and
+// the marker's paler interior on the other, is not centred on it: the outer squares'
+// centroids move inwards, the marker looks smaller and the pose puts it too far (0.42 %
+// of the distance for a 60 px 3x3 under a defocus of 1.4 px and JPEG). The square grown
+// by half a unit each way holds nearly all of its spread ink and little of its
+// neighbours' (the gaps are at least two units), and the paper level of the ring round
+// the square is measured where the square is, so that neither the window's edge nor
+// uneven light pulls the centroid: in the same conditions the bias is 0.01 %.
+#include <algorithm>
+#include <array>
+#include <cstdint>
+
+#include <opencv2/imgproc.hpp>
+
+#include "stages.hpp"
+
+namespace lftag::detail {
+namespace {
+
+constexpr double kGrow = 0.5;  // units round the square
+// Below this many pixels per unit the window's half unit is under 0.6 px, and which
+// pixels it holds weighs more than the ink in them: the blobs' centroids are then better
+// (measured on 22 to 40 px markers, with and without defocus).
+constexpr double kMinPixelsPerUnit = 1.25;
+
+// The pixels x0..x1 (inclusive) of row y inside convex quadrilateral q (empty when x1 < x0).
+std::pair<int, int> row_span(const std::array<cv::Point2d, 4>& q, int y) {
+  double lo = 1e300, hi = -1e300;
+  for (int i = 0; i < 4; ++i) {
+    const cv::Point2d a = q[i], b = q[(i + 1) % 4];
+    if ((a.y - y) * (b.y - y) > 0 || a.y == b.y) continue;  // the edge does not cross the row
+    const double x = a.x + (b.x - a.x) * (y - a.y) / (b.y - a.y);
+    lo = std::min(lo, x), hi = std::max(hi, x);
+  }
+  if (lo > hi) return {1, 0};
+  return {int(std::ceil(lo)), int(std::floor(hi))};
+}
+
+// Unit rectangle r grown by `grow` each way, in image pixels as observed.
+std::array<cv::Point2d, 4> observed_quad(const UnitRect& r, double grow, const cv::Matx33d& homography,
+                                         const Camera& camera) {
+  std::vector<cv::Point2d> q{{r.x - grow, r.y - grow},
+                             {r.x + r.width + grow, r.y - grow},
+                             {r.x + r.width + grow, r.y + r.height + grow},
+                             {r.x - grow, r.y + r.height + grow}};
+  cv::perspectiveTransform(q, q, homography);
+  distort(camera, q);
+  return {q[0], q[1], q[2], q[3]};
+}
+
+}  // namespace
+
+std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
+                                        const cv::Matx33d& homography) {
+  const double side = family.side();
+  if (!(smallest_scale(homography, {side / 2, side / 2}) >= kMinPixelsPerUnit)) return {};
+  std::vector<cv::Point2d> out;
+  for (int g = 0; g < family.cell_count(); ++g) {
+    const UnitRect s = family.square(g, family.is_baseline(g) ? 0 : id.digit(family.data_index(g)));
+    const std::array<cv::Point2d, 4> window = observed_quad(s, kGrow, homography, camera);
+    const std::array<cv::Point2d, 4> square = observed_quad(s, 0, homography, camera);
+    for (const cv::Point2d& p : window)  // a window cut by the frame's edge loses ink on one side
+      if (!(p.x >= 0 && p.y >= 0 && p.x <= image.width - 1 && p.y <= image.height - 1)) return {};
+    double top = 1e300, bottom = -1e300;
+    for (const cv::Point2d& p : window) top = std::min(top, p.y), bottom = std::max(bottom, p.y);
+    const int y0 = int(std::ceil(top)), y1 = int(std::floor(bottom));
+    // The paper level: the median grey of the ring, the window's pixels outside the square.
+    std::array<int, 256> ring{};
+    int ring_size = 0;
+    for (int y = y0; y <= y1; ++y) {
+      const auto [a, b] = row_span(window, y);
+      const auto [sa, sb] = row_span(square, y);
+      const std::uint8_t* row = image.data + y * image.stride;
+      for (int x = a; x <= b; ++x)
+        if (x < sa || x > sb) ++ring[row[x]], ++ring_size;
+    }
+    if (ring_size == 0) return {};
+    int white = 0, below = ring[0];
+    while (2 * below <= ring_size) below += ring[++white];
+    double m = 0, mx = 0, my = 0;
+    for (int y = y0; y <= y1; ++y) {
+      const auto [a, b] = row_span(window, y);
+      const std::uint8_t* row = image.data + y * image.stride;
+      std::int64_t row_m = 0, row_mx = 0;
+      for (int x = a; x <= b; ++x) {
+        const int ink = std::max(0, white - row[x]);
+        row_m += ink, row_mx += std::int64_t(ink) * x;
+      }
+      m += double(row_m), mx += double(row_mx), my += double(row_m) * y;
+    }
+    if (m <= 0) return {};
+    out.emplace_back(mx / m, my / m);
+  }
+  return out;
+}
+
+}  // namespace lftag::detail

@@ -1,0 +1,162 @@
+// SPDX-License-Identifier: LGPL-2.1-or-later
+// Cell centroids for the final pose (src/detect/cell_centroids.cpp): each square's ink
+// over its window under the decoded homography, on rendered markers with known truth.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <opencv2/imgproc.hpp>
+
+#include "lftag/detector.hpp"
+#include "lftag/render.hpp"
+#include "scenes.hpp"
+#include "stages.hpp"
+
+using namespace lftag;
+using lftag::detail::cell_centroids;
+using lftag::test::random_id;
+using lftag::test::rotation;
+
+namespace {
+
+const Camera kCamera = Camera::pinhole(800, 800, 319.5, 239.5, 640, 480);
+
+struct Rendered {
+  SceneMarker marker;
+  MarkerTruth truth;
+  cv::Mat1b image;
+  cv::Matx33d homography;  // units -> pixels, from the true outer corners
+};
+
+// A marker `pixels` across at a random turn, tilt (up to 30 degrees) and sub-pixel place,
+// defocused by `defocus` px and lit by a gradient of `gradient` across the frame.
+Rendered render(int n, double pixels, double defocus, double gradient, std::mt19937_64& rng,
+                cv::Point2d at = {0, 0}) {
+  std::uniform_real_distribution<double> u(-1, 1);
+  Rendered r;
+  r.marker.family = Family(n);
+  r.marker.id = random_id(r.marker.family, rng);
+  r.marker.tag_size = 0.1;
+  const double z = kCamera.fx * 0.1 / pixels;
+  r.marker.tvec = {(at.x + 0.4 * u(rng)) * z / kCamera.fx, (at.y + 0.4 * u(rng)) * z / kCamera.fx, z};
+  r.marker.rvec = rotation(180 * u(rng), 30 * u(rng), 30 * u(rng));
+  SceneParams p;
+  p.camera = kCamera;
+  p.background = 0.45;
+  p.light_gradient = gradient;
+  p.light_angle_deg = 360 * u(rng);
+  p.noise_sigma = 1;
+  const SceneRenderer renderer(p);
+  cv::Mat1f linear = renderer.render_linear({to_target(r.marker)});
+  if (defocus > 0) cv::GaussianBlur(linear, linear, cv::Size(), defocus);
+  r.image = renderer.quantize(linear, rng());
+  r.truth = make_truth(kCamera, r.marker);
+  const double s = r.marker.family.side();
+  const std::vector<cv::Point2f> units{{0, 0}, {float(s), 0}, {float(s), float(s)}, {0, float(s)}};
+  const std::vector<cv::Point2f> corners(r.truth.corners.begin(), r.truth.corners.end());
+  r.homography = cv::Matx33d(cv::getPerspectiveTransform(units, corners));
+  return r;
+}
+
+// Mean over the outer cells of each centroid's error along the direction from the
+// marker's centre: negative when the centroids are pulled inwards.
+double mean_radial_error(const MarkerTruth& truth, const std::vector<cv::Point2d>& found) {
+  const int n = truth.family.n();
+  double sum = 0;
+  int count = 0;
+  for (int g = 0; g < n * n; ++g) {
+    const int r = g / n, c = g % n;
+    if (r != 0 && c != 0 && r != n - 1 && c != n - 1) continue;
+    const cv::Point2d out = truth.centroids[g] - truth.center;
+    sum += (found[g] - truth.centroids[g]).dot(out) / cv::norm(out);
+    ++count;
+  }
+  return sum / count;
+}
+
+}  // namespace
+
+TEST(CellCentroids, DefocusDoesNotPullTheSquaresInwards) {
+  // 60 px markers under a defocus of 1.2 px: the blob centroids that decoding uses come
+  // out about 0.05 px inwards (the marker looks 0.3 % smaller and the pose puts it that
+  // much too far); the cells' windows put each square within 0.1 px of the truth and no
+  // nearer the centre on average, under the true homography and the decoded one, and
+  // the detector's distance is right within 0.05 % on average.
+  std::mt19937_64 rng(3);
+  for (int n : {3, 4}) {
+    double cells = 0, detected = 0, blobs = 0, depth = 0;
+    const int markers = 12;
+    for (int k = 0; k < markers; ++k) {
+      const Rendered r = render(n, 60, 1.2, 0, rng);
+      const std::vector<cv::Point2d> found =
+          cell_centroids(ImageView(r.image), kCamera, r.marker.family, r.marker.id, r.homography);
+      ASSERT_EQ(found.size(), std::size_t(n * n));
+      for (int g = 0; g < n * n; ++g) EXPECT_LT(cv::norm(found[g] - r.truth.centroids[g]), 0.1) << n << " cell " << g;
+      cells += mean_radial_error(r.truth, found) / markers;
+
+      // The detector's own blob centroids, from its trace, for the comparison.
+      DetectorParams params;
+      params.families = {r.marker.family};
+      params.camera = kCamera;
+      Detector detector(params);
+      DetectionTrace trace;
+      const std::vector<Detection> detections = detector.detect(ImageView(r.image), nullptr, &trace);
+      ASSERT_EQ(detections.size(), 1u);
+      EXPECT_EQ(detections[0].id, r.marker.id);
+      // Its centroids are the cells', under the homography it decoded.
+      for (int g = 0; g < n * n; ++g) EXPECT_LT(cv::norm(detections[0].centroids[g] - r.truth.centroids[g]), 0.1);
+      detected += mean_radial_error(r.truth, detections[0].centroids) / markers;
+      depth += (cv::norm(detections[0].tvec) / cv::norm(r.marker.tvec) - 1) / markers;
+      std::vector<cv::Point2d> nearest;  // the trace's blobs in grid order
+      for (int g = 0; g < n * n; ++g) {
+        cv::Point2d best = trace.candidates.at(0).at(0);
+        for (const cv::Point2d& b : trace.candidates[0])
+          if (cv::norm(b - r.truth.centroids[g]) < cv::norm(best - r.truth.centroids[g])) best = b;
+        nearest.push_back(best);
+      }
+      blobs += mean_radial_error(r.truth, nearest) / markers;
+    }
+    EXPECT_LT(std::abs(cells), 0.01) << n << "x" << n;
+    EXPECT_LT(std::abs(detected), 0.01) << n << "x" << n;
+    EXPECT_LT(std::abs(depth), 5e-4) << n << "x" << n << ": the pose's distance, relative";
+    EXPECT_LT(blobs, -0.025) << n << "x" << n << ": the set-up no longer shows the blobs' bias";
+  }
+}
+
+TEST(CellCentroids, UnevenLightDoesNotMoveThem) {
+  // Light varying by 80 % across the frame (at any angle): each window's paper level is
+  // its own, so the darker side of a square's ring weighs nothing.
+  std::mt19937_64 rng(5);
+  for (int n : {3, 4})
+    for (int k = 0; k < 8; ++k) {
+      const Rendered r = render(n, 80, 0.6, 0.8, rng);
+      const std::vector<cv::Point2d> found =
+          cell_centroids(ImageView(r.image), kCamera, r.marker.family, r.marker.id, r.homography);
+      ASSERT_EQ(found.size(), std::size_t(n * n));
+      for (int g = 0; g < n * n; ++g) EXPECT_LT(cv::norm(found[g] - r.truth.centroids[g]), 0.08) << n << " cell " << g;
+      EXPECT_LT(std::abs(mean_radial_error(r.truth, found)), 0.03);
+    }
+}
+
+TEST(CellCentroids, NoneForASmallMarkerOrAWindowOutsideTheFrame) {
+  std::mt19937_64 rng(7);
+  // 3x3 at 26 px across: about 1.1 px per unit, where the window's pixels are too few.
+  const Rendered small = render(3, 26, 0, 0, rng);
+  EXPECT_TRUE(cell_centroids(ImageView(small.image), kCamera, small.marker.family, small.marker.id, small.homography)
+                  .empty());
+  // 44 px: read.
+  const Rendered fair = render(3, 44, 0, 0, rng);
+  EXPECT_EQ(cell_centroids(ImageView(fair.image), kCamera, fair.marker.family, fair.marker.id, fair.homography).size(),
+            9u);
+  // A marker whose squares' windows reach past the frame's edge.
+  const Rendered edge = render(3, 80, 0, 0, rng, {-300, 0});
+  EXPECT_TRUE(cell_centroids(ImageView(edge.image), kCamera, edge.marker.family, edge.marker.id, edge.homography)
+                  .empty());
+  // A homography that is not finite.
+  const double nan = std::nan("");
+  EXPECT_TRUE(cell_centroids(ImageView(fair.image), kCamera, fair.marker.family, fair.marker.id,
+                             cv::Matx33d(nan, 0, 0, 0, 1, 0, 0, 0, 1))
+                  .empty());
+}
