@@ -56,6 +56,7 @@ Outcome score(const std::vector<Detected>& detections, const std::string& id, co
     if (d.pose) {
       out.rotation_error_deg = rotation_error_deg(d.pose->rvec, truth.rvec);
       out.translation_error_m = cv::norm(d.pose->tvec - truth.tvec);
+      out.depth_error_m = cv::norm(d.pose->tvec) - cv::norm(truth.tvec);
     }
   }
   return out;

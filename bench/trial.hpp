@@ -34,6 +34,7 @@ struct Outcome {
   cv::Point2d center_offset{kNaN, kNaN};  // found centre - true centre, pixels
   double rotation_error_deg = kNaN;   // of the found detection, when it has a pose
   double translation_error_m = kNaN;
+  double depth_error_m = kNaN;  // signed: the found distance to the camera minus the true one
 };
 
 // Mean projected edge of the tag (outer border) in pixels.

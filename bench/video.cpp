@@ -232,7 +232,7 @@ struct Truth {
 struct Seen {
   bool found = false;
   int wrong = 0;  // wrong detections in the frame whose centre is nearest this marker
-  double rotation_deg = kNaN, translation_m = kNaN;
+  double rotation_deg = kNaN, translation_m = kNaN, depth_m = kNaN;
 };
 
 // The same slot carries the same marker through a clip; ids repeat after kIds slots.
@@ -345,6 +345,7 @@ bool run_video(const Options& options) {
           out[m].found = o.found;
           out[m].rotation_deg = o.rotation_error_deg;
           out[m].translation_m = o.translation_error_m;
+          out[m].depth_m = o.depth_error_m;
         }
         // score() counts the other markers' detections as wrong for each marker; in a frame
         // of several, a detection is wrong when it is none of them. It is charged to the
@@ -379,7 +380,7 @@ bool run_video(const Options& options) {
   }
   Csv markers_csv(options.out / "video.csv",
                   {"system", "family", "clip", "frame", "marker", "id", "edge_px", "tilt_deg", "distance_m", "found",
-                   "wrong", "translation_error_m", "translation_error_pct", "rotation_error_deg"});
+                   "wrong", "translation_error_m", "translation_error_pct", "depth_error_pct", "rotation_error_deg"});
   Csv summary_csv(options.out / "video_summary.csv",
                   {"system", "family", "bin_kind", "bin", "markers", "found", "recall_pct", "wrong", "with_pose",
                    "median_translation_pct", "p90_translation_pct", "median_rotation_deg"});
@@ -400,7 +401,7 @@ bool run_video(const Options& options) {
         const double relative = 100 * o.translation_m / t.distance;
         markers_csv.row(name, families[s], jobs[j].clip, jobs[j].frame, m,
                         marker_id(ids[s], jobs[j].clip, m), t.edge, t.tilt, t.distance,
-                        int(o.found), o.wrong, o.translation_m, relative, o.rotation_deg);
+                        int(o.found), o.wrong, o.translation_m, relative, 100 * o.depth_m / t.distance, o.rotation_deg);
         for (int b : {0, 1 + bin_of(kEdgeBins, t.edge), 1 + edge_bins + bin_of(kTiltBins, t.tilt)}) {
           Tally& k = tally[b];
           ++k.markers;
