@@ -17,7 +17,8 @@
 //   16 hypotheses, gradient   -                                 decode, edge_gradient (decode.cpp)
 //   tau3, decoding error      max_decode_error,                 decode (decode.cpp)
 //                             max_cell_residual, min_decode_margin, max_ink_spread
-//   final pose (IPPE)         refine_pose, tag_size, camera     estimate_pose (pose.cpp)
+//   final pose (IPPE)         refine_pose, tag_size, camera     cell_centroids (cell_centroids.cpp),
+//                                                               estimate_pose (pose.cpp)
 //   (not in the paper)        second_look, max_second_looks     near_candidates, enlarge_patch,
 //                                                               binarise_patch (second_look.cpp)
 //   (not in the paper)        second_look, min_pixels_per_unit  coarse_outlines, read_outline,
@@ -311,9 +312,9 @@ double elapsed_ms(std::chrono::steady_clock::time_point start);
 // ---------------------------------------------------------------- cell_centroids.cpp
 // The ink centroids of marker `id`'s squares (grid order, image pixels as observed), each
 // over its square grown by half a unit under `homography` (units -> undistorted pixels),
-// the ink weighed against the median grey of the window's ring round the square; empty
-// when the marker has under 1.25 pixels per unit, or a window is not wholly inside the
-// image or holds no ink.
+// the ink weighed against the median grey of the ring half a unit further out; empty when
+// the marker has under 1.25 pixels per unit, or a window is not wholly inside the image
+// or holds no ink.
 std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
                                         const cv::Matx33d& homography);
 

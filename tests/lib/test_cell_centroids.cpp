@@ -81,7 +81,7 @@ double mean_radial_error(const MarkerTruth& truth, const std::vector<cv::Point2d
 TEST(CellCentroids, DefocusDoesNotPullTheSquaresInwards) {
   // 60 px markers under a defocus of 1.2 px: the blob centroids that decoding uses come
   // out about 0.05 px inwards (the marker looks 0.3 % smaller and the pose puts it that
-  // much too far); the cells' windows put each square within 0.1 px of the truth and no
+  // much too far); the cells' windows put each square within 0.15 px of the truth and no
   // nearer the centre on average, under the true homography and the decoded one, and
   // the detector's distance is right within 0.05 % on average.
   std::mt19937_64 rng(3);
@@ -93,7 +93,7 @@ TEST(CellCentroids, DefocusDoesNotPullTheSquaresInwards) {
       const std::vector<cv::Point2d> found =
           cell_centroids(ImageView(r.image), kCamera, r.marker.family, r.marker.id, r.homography);
       ASSERT_EQ(found.size(), std::size_t(n * n));
-      for (int g = 0; g < n * n; ++g) EXPECT_LT(cv::norm(found[g] - r.truth.centroids[g]), 0.1) << n << " cell " << g;
+      for (int g = 0; g < n * n; ++g) EXPECT_LT(cv::norm(found[g] - r.truth.centroids[g]), 0.15) << n << " cell " << g;
       cells += mean_radial_error(r.truth, found) / markers;
 
       // The detector's own blob centroids, from its trace, for the comparison.
@@ -106,7 +106,7 @@ TEST(CellCentroids, DefocusDoesNotPullTheSquaresInwards) {
       ASSERT_EQ(detections.size(), 1u);
       EXPECT_EQ(detections[0].id, r.marker.id);
       // Its centroids are the cells', under the homography it decoded.
-      for (int g = 0; g < n * n; ++g) EXPECT_LT(cv::norm(detections[0].centroids[g] - r.truth.centroids[g]), 0.1);
+      for (int g = 0; g < n * n; ++g) EXPECT_LT(cv::norm(detections[0].centroids[g] - r.truth.centroids[g]), 0.15);
       detected += mean_radial_error(r.truth, detections[0].centroids) / markers;
       depth += (cv::norm(detections[0].tvec) / cv::norm(r.marker.tvec) - 1) / markers;
       std::vector<cv::Point2d> nearest;  // the trace's blobs in grid order

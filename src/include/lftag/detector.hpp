@@ -146,7 +146,10 @@ double decode_threshold_default(const Family& family);
 struct Detection {
   Family family{3};
   TagId id;
-  std::vector<cv::Point2d> centroids;    // n^2 blob centroids in grid order (image pixels)
+  // The n^2 squares' centroids the pose was computed from, grid order (image pixels): each
+  // square's ink over its window under the decoded homography, or the blob's centroid
+  // for a marker under 1.25 pixels per unit or by the frame's edge.
+  std::vector<cv::Point2d> centroids;
   std::array<cv::Point2d, 4> keypoints;  // K0..K3 (image pixels)
   std::array<cv::Point2d, 4> corners;    // outer border corners from the pose, clockwise from top-left
   cv::Point2d center;                    // marker centre from the pose (image pixels)
