@@ -53,11 +53,13 @@ struct Quad {
 
 Quad observed_quad(const UnitRect& r, double grow, const cv::Matx33d& homography, const Camera& camera,
                    const ImageView& image) {
-  std::vector<cv::Point2d> q{{r.x - grow, r.y - grow},
-                             {r.x + r.width + grow, r.y - grow},
-                             {r.x + r.width + grow, r.y + r.height + grow},
-                             {r.x - grow, r.y + r.height + grow}};
-  cv::perspectiveTransform(q, q, homography);
+  std::vector<cv::Point2d> q;
+  for (const cv::Point2d u : {cv::Point2d(r.x - grow, r.y - grow), cv::Point2d(r.x + r.width + grow, r.y - grow),
+                              cv::Point2d(r.x + r.width + grow, r.y + r.height + grow),
+                              cv::Point2d(r.x - grow, r.y + r.height + grow)}) {
+    const cv::Vec3d p = homography * cv::Vec3d(u.x, u.y, 1);
+    q.emplace_back(p[0] / p[2], p[1] / p[2]);
+  }
   distort(camera, q);
   Quad out;
   out.inside = true;
@@ -92,8 +94,16 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
       const auto [a, b] = paper.span(y);
       const auto [wa, wb] = window.span(y);
       const std::uint8_t* row = image.data + y * image.stride;
-      for (int x = a; x <= b; ++x)
-        if (x < wa || x > wb) ++ring[row[x]], ++ring_size;
+      const auto count = [&](int from, int to) {
+        for (int x = from; x <= to; ++x) ++ring[row[x]];
+        ring_size += std::max(0, to - from + 1);
+      };
+      if (wa > wb) {  // the window misses the row
+        count(a, b);
+      } else {
+        count(a, std::min(b, wa - 1));
+        count(std::max(a, wb + 1), b);
+      }
     }
     if (ring_size == 0) return {};
     int white = 0, below = ring[0];
