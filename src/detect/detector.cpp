@@ -179,20 +179,20 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     det.ink_spread = d->ink_spread;
     det.edge_score = d->edge_score;
     // The pose's centroids: each square's ink over its window under the decoding's
-    // homography, unbiased by defocus (cell_centroids.cpp); the blobs' where a window
-    // leaves the frame.
-    detail::Candidate posed_c = c;
+    // homography, unbiased by defocus (cell_centroids.cpp); the blobs' for a marker under
+    // 1.25 px per unit or by the frame's edge.
+    detail::Candidate for_pose = c;
     const std::vector<cv::Point2d> cells = detail::cell_centroids(work, camera, c.family, d->id, d->homography);
     if (!cells.empty()) {
       const std::vector<cv::Point2d> ideal = camera.undistort(cells);
       for (int g = 0; g < c.family.cell_count(); ++g) {
-        detail::Blob& b = posed_c.blobs[d->blob_of_cell[g]];
+        detail::Blob& b = for_pose.blobs[d->blob_of_cell[g]];
         b.centroid = cells[g], b.point = ideal[g];
       }
     }
-    for (int g = 0; g < c.family.cell_count(); ++g) det.centroids.push_back(posed_c.blobs[d->blob_of_cell[g]].centroid);
-    for (int i = 0; i < 4; ++i) det.keypoints[i] = posed_c.blobs[k->blob[i]].centroid;
-    const bool posed = detail::estimate_pose(posed_c, *d, camera, p, det);
+    for (int g = 0; g < c.family.cell_count(); ++g) det.centroids.push_back(for_pose.blobs[d->blob_of_cell[g]].centroid);
+    for (int i = 0; i < 4; ++i) det.keypoints[i] = for_pose.blobs[k->blob[i]].centroid;
+    const bool posed = detail::estimate_pose(for_pose, *d, camera, p, det);
     stats.pose_ms += elapsed_ms(start);
     Stage outcome = Stage::detected;
     if (!posed) outcome = Stage::pose;
