@@ -87,7 +87,7 @@ class SparseTemplate {
   // template smeared evenly along it, sampled there.
   SparseTemplate(const cv::Mat1f& templ, int stride, cv::Point2d smear = {}) {
     const int taps = smear == cv::Point2d() ? 1 : int(std::ceil(cv::norm(smear))) + 1;
-    double mean = 0;
+    double sum = 0;
     for (int y = stride / 2; y < templ.rows; y += stride)
       for (int x = stride / 2; x < templ.cols; x += stride) {
         double value = templ(y, x);
@@ -100,10 +100,37 @@ class SparseTemplate {
           value /= taps;
         }
         points_.push_back({float(x), float(y), float(value)});
-        mean += value;
+        sum += value;
       }
-    mean /= double(points_.size());
-    for (Point& p : points_) p.value -= float(mean), norm_ += double(p.value) * p.value;
+    centre(sum / double(points_.size()));
+  }
+
+  // The template smeared evenly along `direction` (unit vector) over each of `lengths`
+  // (template pixels, rising), sampled at every `stride`-th pixel: the samples along the
+  // longest smear are taken once, a pixel apart, and shared by the shorter ones.
+  static std::vector<SparseTemplate> smeared(const cv::Mat1f& templ, int stride, cv::Point2d direction,
+                                             const std::vector<double>& lengths) {
+    const int reach = int(lengths.back() / 2);
+    std::vector<SparseTemplate> out;
+    for (std::size_t k = 0; k < lengths.size(); ++k) out.push_back(SparseTemplate());
+    std::vector<float> along(2 * reach + 1);
+    for (int y = stride / 2; y < templ.rows; y += stride)
+      for (int x = stride / 2; x < templ.cols; x += stride) {
+        for (int i = -reach; i <= reach; ++i)
+          along[i + reach] = bilinear_at(templ, float(x + i * direction.x), float(y + i * direction.y));
+        for (std::size_t k = 0; k < lengths.size(); ++k) {
+          const int half = int(lengths[k] / 2);
+          float sum = 0;
+          for (int i = -half; i <= half; ++i) sum += along[i + reach];
+          out[k].points_.push_back({float(x), float(y), sum / float(2 * half + 1)});
+        }
+      }
+    for (SparseTemplate& t : out) {
+      double sum = 0;
+      for (const Point& p : t.points_) sum += p.value;
+      t.centre(sum / double(t.points_.size()));
+    }
+    return out;
   }
 
   // `warp`: template -> image pixels (3x3, CV_32F). Image pixels outside repeat the edge.
@@ -128,6 +155,13 @@ class SparseTemplate {
     const int x1 = std::min(x0 + 1, image.cols - 1), y1 = std::min(y0 + 1, image.rows - 1);
     const float fx = x - x0, fy = y - y0;
     return (1 - fy) * ((1 - fx) * image(y0, x0) + fx * image(y0, x1)) + fy * ((1 - fx) * image(y1, x0) + fx * image(y1, x1));
+  }
+
+  SparseTemplate() = default;
+
+  // Zero mean, and the norm the correlation divides by.
+  void centre(double mean) {
+    for (Point& p : points_) p.value -= float(mean), norm_ += double(p.value) * p.value;
   }
 
   struct Point {
@@ -718,16 +752,25 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // precision does not), and the template is blurred to the resolution of the crop.
   const double per_unit = pixels_per_unit_of(coarse, side);
   if (!(per_unit >= 0.2)) return std::nullopt;  // half the readable resolution, or degenerate
+  // A large crop is reduced before anything else reads it: by interpolation for the search
+  // of the start, which most outlines in photos do not pass, by the area average, which
+  // costs several times more, for the alignment.
+  const cv::Size reduced_size(std::max(8, int(std::lround(box.width * kTemplateScale / per_unit))),
+                              std::max(8, int(std::lround(box.height * kTemplateScale / per_unit))));
+  const auto reduced = [&](int interpolation) {
+    cv::Mat1b pixels;
+    cv::resize(image.mat()(box), pixels, reduced_size, 0, 0, interpolation);
+    cv::Mat1f out;
+    pixels.convertTo(out, CV_32F, 1.0 / 255);
+    return out;
+  };
   cv::Mat1f crop;
-  image.mat()(box).convertTo(crop, CV_32F, 1.0 / 255);
+  if (per_unit > kTemplateScale) crop = reduced(cv::INTER_LINEAR);
+  else image.mat()(box).convertTo(crop, CV_32F, 1.0 / 255);
   const double edge_angle = edge_direction(crop);
   if (per_unit < 1) {
     const int enlarge = std::clamp(int(std::ceil(2 / per_unit)), 1, 4);
     cv::resize(crop, crop, cv::Size(), enlarge, enlarge, cv::INTER_CUBIC);
-  } else if (per_unit > kTemplateScale) {
-    const double reduce = kTemplateScale / per_unit;
-    cv::resize(crop, crop, cv::Size(std::max(8, int(std::lround(box.width * reduce))),
-                                    std::max(8, int(std::lround(box.height * reduce)))), 0, 0, cv::INTER_AREA);
   }
   // Crop pixels -> frame pixels.
   const double zx = double(crop.cols) / box.width, zy = double(crop.rows) / box.height;
@@ -802,11 +845,43 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // The alignment, the costly part, moves a start by much less than a fifth of its scale:
   // in the range and blur sweeps every accepted reading started at 0.43 px per unit or
   // more, while most outlines of photos that get this far start under 0.3.
-  if (const double start_per_unit = pixels_per_unit_of(start, side); start_per_unit < 0.8 * min_pixels_per_unit) {
+  const double start_per_unit = pixels_per_unit_of(start, side);
+  if (start_per_unit < 0.8 * min_pixels_per_unit) {
     OutlineReading out;
     out.correlation = start_correlation, out.pixels_per_unit = start_per_unit;
     return out;
   }
+  // From two pixels per unit a marker's structure shows plainly at its start, once a
+  // motion blur is allowed for: in the range, blur and video sweeps every reading accepted
+  // there had started at 0.68 or more, while the outlines of other families' markers and
+  // of AprilTags start at 0.64 or less. Those are spared the alignment, which is most of
+  // the cost of a frame that holds them.
+  if (start_per_unit >= kResolvedPixelsPerUnit && start_correlation < kMinResolvedStartCorrelation) {
+    // The structure smeared in eight directions over the lengths sought after the
+    // alignment, blurred as at two to three pixels per unit: drawn once per thread.
+    thread_local std::array<std::vector<SparseTemplate>, Family::kMaxN + 1> smeared_structures;
+    std::vector<SparseTemplate>& smeared = smeared_structures[family.n()];
+    if (smeared.empty()) {
+      cv::Mat1f blurred;
+      cv::GaussianBlur(sharp[family.n()], blurred, cv::Size(), 0.5);
+      std::vector<double> lengths;  // template pixels
+      for (double units = 1.5; units <= kMaxSmear + 1; units += 1.5) lengths.push_back(units * kTemplateScale);
+      for (int a = 0; a < 8; ++a)
+        for (SparseTemplate& t :
+             SparseTemplate::smeared(blurred, 3, {std::cos(a * CV_PI / 8), std::sin(a * CV_PI / 8)}, lengths))
+          smeared.push_back(std::move(t));
+    }
+    const cv::Mat warp = warp_of(start);
+    double best = start_correlation;
+    for (std::size_t i = 0; i < smeared.size() && best < kMinResolvedStartCorrelation; ++i)
+      best = std::max(best, smeared[i].correlation(crop, warp));
+    if (best < kMinResolvedStartCorrelation) {
+      OutlineReading out;
+      out.correlation = best, out.pixels_per_unit = start_per_unit;
+      return out;
+    }
+  }
+  if (per_unit > kTemplateScale) crop = reduced(cv::INTER_AREA);
   cv::Mat warp = warp_of(start);
   const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 25, 1e-4);
   double correlation = 0;

@@ -226,6 +226,8 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
 
 // The checks an outline reading must pass to be a detection, each scale-free.
 constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it
+// From kResolvedPixelsPerUnit, at the start too, with the best motion blur.
+constexpr double kMinResolvedStartCorrelation = 0.66, kResolvedPixelsPerUnit = 2;
 constexpr double kMinSmearedCorrelation = 0.6;  // aligned, below which no motion blur is sought
 constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContrast = 16, kMinMargin = 0.03, kMinBaselineGap = 0.25;
 // Outline reads a frame at most (each outline and family is one): the work bound of a

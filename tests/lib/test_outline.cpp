@@ -385,3 +385,39 @@ TEST(OutlineReading, AMarkerCutByTheFrameEdgeIsReadOnlyWhereItsSquaresAreSeen) {
       }
     }
 }
+
+TEST(OutlineReading, OtherMarkersAreRefusedBeforeTheAlignment) {
+  // Sharp markers at three to four pixels per unit that are not 3x3 LFTags: 4x4 and 5x5
+  // LFTags and square binary markers like AprilTag 36h11's (a black border around 6 x 6
+  // random bits). Their structure correlates too little at the start, even smeared, so
+  // the reading stops there: nothing aligned, no contrast measured.
+  DetectorParams params;
+  std::mt19937_64 rng(21);
+  const std::array<cv::Point2d, 4> quad = {cv::Point2d(40, 40), {119.5, 40}, {119.5, 119.5}, {40, 119.5}};
+  std::vector<cv::Mat1b> images;
+  for (const int n : {4, 5}) {
+    cv::Mat1b image(160, 160, std::uint8_t(230));
+    const cv::Mat1b marker = rasterize_marker(Family(n), random_id(Family(n), rng), 80.0 / Family(n).side(), 0);
+    marker.copyTo(image(cv::Rect(40, 40, marker.cols, marker.rows)));
+    images.push_back(image);
+  }
+  for (int k = 0; k < 4; ++k) {
+    cv::Mat1b image(160, 160, std::uint8_t(230));
+    cv::rectangle(image, cv::Rect(40, 40, 80, 80), 20, cv::FILLED);
+    for (int r = 0; r < 6; ++r)
+      for (int c = 0; c < 6; ++c)
+        if (rng() % 2) cv::rectangle(image, cv::Rect(50 + 10 * c, 50 + 10 * r, 10, 10), 230, cv::FILLED);
+    images.push_back(image);
+  }
+  int at_the_gate = 0;
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    const auto reading = read_outline(ImageView(images[i]), quad, Family(3));
+    if (!reading) continue;  // refused even earlier, under kMinStartCorrelation
+    ++at_the_gate;
+    EXPECT_FALSE(reading->read) << "image " << i;
+    EXPECT_EQ(reading->contrast, 0) << "image " << i << ": aligned";
+    EXPECT_LT(reading->correlation, kMinResolvedStartCorrelation) << "image " << i;
+    EXPECT_EQ(outline_stage(*reading, params), Stage::structure) << "image " << i;
+  }
+  EXPECT_GE(at_the_gate, 3);  // the 4x4, the 5x5 and a square binary marker (measured)
+}
