@@ -180,10 +180,11 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     }
     const double hole_fill = double(inside) / (w * h);
     if (hole_fill < 0.2 || hole_fill > 0.8) continue;
-    // Or, under a long motion blur, a border with every column of squares smeared into
-    // it: its hole holds nothing and is the gaps, spanning most of the border's box but
-    // filling little of its own (a frame around a plain hole fills it), and the white
-    // ring's two sides along the blur still line the border.
+    // The hole holds two squares or more; or, under a long motion blur that smeared
+    // every column of squares into the border, nothing: then the hole is the gaps,
+    // spanning most of the border's box but filling little of its own (a frame around a
+    // plain hole fills it), and the white ring's two sides along the blur still line
+    // the border.
     const int hw = white.x1 - white.x0 + 1, hh = white.y1 - white.y0 + 1;
     const bool smeared = squares == 0 && white.child_count == 0 && hw >= 0.6 * w && hh >= 0.6 * h &&
                          white.area <= 0.6 * hw * hh && lines_opposite_sides(tree, hole);
