@@ -137,6 +137,23 @@ class SparseTemplate {
   double correlation(const cv::Mat1f& image, const cv::Mat& warp) const {
     const cv::Matx33f w = warp;
     double s = 0, ss = 0, st = 0;
+    if (inside(image, w)) {  // the same sums without the clamps at the image's edges
+      const float* data = image[0];
+      const std::size_t step = image.step1();
+      for (const Point& p : points_) {
+        const float z = w(2, 0) * p.x + w(2, 1) * p.y + w(2, 2);
+        if (!(std::abs(z) > 1e-12f)) return 0;
+        const float x = (w(0, 0) * p.x + w(0, 1) * p.y + w(0, 2)) / z, y = (w(1, 0) * p.x + w(1, 1) * p.y + w(1, 2)) / z;
+        const int x0 = int(x), y0 = int(y);
+        const float fx = x - x0, fy = y - y0;
+        const float* a = data + std::size_t(y0) * step + x0;
+        const float* b = a + step;
+        const double g = (1 - fy) * ((1 - fx) * a[0] + fx * a[1]) + fy * ((1 - fx) * b[0] + fx * b[1]);
+        s += g, ss += g * g, st += g * p.value;
+      }
+      const double n = double(points_.size()), variance = ss - s * s / n;
+      return variance > 0 && norm_ > 0 ? st / std::sqrt(variance * norm_) : 0;
+    }
     for (const Point& p : points_) {
       const float z = w(2, 0) * p.x + w(2, 1) * p.y + w(2, 2);
       if (!(std::abs(z) > 1e-12f)) return 0;
@@ -158,6 +175,23 @@ class SparseTemplate {
   }
 
   SparseTemplate() = default;
+
+  // Whether `w` takes the box of the points well inside the image, where no bilinear
+  // sample needs clamping: a homography positive over a box maps it to the quadrilateral
+  // of its corners.
+  bool inside(const cv::Mat1f& image, const cv::Matx33f& w) const {
+    if (points_.empty()) return false;
+    const Point& first = points_.front();
+    const Point& last = points_.back();
+    for (const float x : {first.x, last.x})
+      for (const float y : {first.y, last.y}) {
+        const float z = w(2, 0) * x + w(2, 1) * y + w(2, 2);
+        if (!(z > 1e-6f)) return false;
+        const float u = (w(0, 0) * x + w(0, 1) * y + w(0, 2)) / z, v = (w(1, 0) * x + w(1, 1) * y + w(1, 2)) / z;
+        if (!(u >= 0.01f && v >= 0.01f && u <= image.cols - 2.01f && v <= image.rows - 2.01f)) return false;
+      }
+    return true;
+  }
 
   // Zero mean, and the norm the correlation divides by.
   void centre(double mean) {
