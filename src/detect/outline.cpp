@@ -26,9 +26,6 @@ namespace lftag::detail {
 namespace {
 
 constexpr double kTemplateScale = 3;  // template pixels per unit
-// How much better a blurred structure must correlate at the start than the sharp one to
-// replace it: the realistic video's 3x3 lost a 32 px marker at 0.05, none at 0.1.
-constexpr double kDefocusGain = 0.1;
 constexpr double kRing = 1;           // units of the white margin the template assumes outside
 
 // The fixed structure along one axis of the marker: 0 black, 1 white, 0.5 a data strip.
@@ -817,7 +814,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   thread_local std::array<cv::Mat1f, Family::kMaxN + 1> sharp;
   if (sharp[family.n()].empty()) sharp[family.n()] = structure_template(family);
   cv::Mat1f templ = sharp[family.n()].clone();
-  double sigma = 0.4 / std::min(per_unit, kTemplateScale) * kTemplateScale;  // template pixels
+  const double sigma = 0.4 / std::min(per_unit, kTemplateScale) * kTemplateScale;  // template pixels
   if (sigma > 0.3) cv::GaussianBlur(templ, templ, cv::Size(), sigma);
   const cv::Matx33d to_template = unit_to_template();
   const cv::Matx33d from_frame = to_frame.inv();
@@ -837,7 +834,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     w.convertTo(w, CV_32F);
     return w;
   };
-  SparseTemplate sparse(templ, 3);
+  const SparseTemplate sparse(templ, 3);
   std::array<cv::Point2d, 4> start;
   double start_correlation = -1;
   for (const auto& outline : outlines)
@@ -876,25 +873,6 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
           }
         }
       }
-    }
-  }
-  // Defocus blurs a small marker by more than its pixels do: under 2 px per unit the
-  // structure is also tried blurred by 0.8, 1.2 and 1.6 frame pixels more at the start,
-  // and the blur that correlates best, by kDefocusGain over the sharp structure, is the
-  // template's from there on. Not for 2x2, whose two data cells leave its reading the
-  // least to check: with it, one outline of the marker-free photos was read as a 2x2.
-  if (family.n() >= 3 && per_unit < kResolvedPixelsPerUnit && start_correlation >= kMinStartCorrelation / 2 &&
-      start_correlation < kMinCorrelation) {
-    const cv::Mat warp = warp_of(start);
-    const double sharp_correlation = start_correlation;
-    for (const double defocus : {0.8, 1.2, 1.6}) {
-      const double blur = std::hypot(0.4, defocus) / per_unit * kTemplateScale;
-      cv::Mat1f blurred;
-      cv::GaussianBlur(sharp[family.n()], blurred, cv::Size(), blur);
-      const SparseTemplate candidate(blurred, 3);
-      if (const double c = candidate.correlation(crop, warp);
-          c > start_correlation && c > sharp_correlation + kDefocusGain)
-        start_correlation = c, templ = blurred, sigma = blur, sparse = candidate;
     }
   }
   if (start_correlation < kMinStartCorrelation) return std::nullopt;
