@@ -134,35 +134,18 @@ class SparseTemplate {
   }
 
   // `warp`: template -> image pixels (3x3, CV_32F). Image pixels outside repeat the edge.
-  double correlation(const cv::Mat1f& image, const cv::Mat& warp) const {
-    const cv::Matx33f w = warp;
-    double s = 0, ss = 0, st = 0;
-    if (inside(image, w)) {  // the same sums without the clamps at the image's edges
-      const float* data = image[0];
-      const std::size_t step = image.step1();
-      for (const Point& p : points_) {
-        const float z = w(2, 0) * p.x + w(2, 1) * p.y + w(2, 2);
-        if (!(std::abs(z) > 1e-12f)) return 0;
-        const float x = (w(0, 0) * p.x + w(0, 1) * p.y + w(0, 2)) / z, y = (w(1, 0) * p.x + w(1, 1) * p.y + w(1, 2)) / z;
-        const int x0 = int(x), y0 = int(y);
-        const float fx = x - x0, fy = y - y0;
-        const float* a = data + std::size_t(y0) * step + x0;
-        const float* b = a + step;
-        const double g = (1 - fy) * ((1 - fx) * a[0] + fx * a[1]) + fy * ((1 - fx) * b[0] + fx * b[1]);
-        s += g, ss += g * g, st += g * p.value;
-      }
-      const double n = double(points_.size()), variance = ss - s * s / n;
-      return variance > 0 && norm_ > 0 ? st / std::sqrt(variance * norm_) : 0;
-    }
-    for (const Point& p : points_) {
-      const float z = w(2, 0) * p.x + w(2, 1) * p.y + w(2, 2);
-      if (!(std::abs(z) > 1e-12f)) return 0;
-      const double g = bilinear_at(image, (w(0, 0) * p.x + w(0, 1) * p.y + w(0, 2)) / z,
-                                   (w(1, 0) * p.x + w(1, 1) * p.y + w(1, 2)) / z);
-      s += g, ss += g * g, st += g * p.value;
-    }
-    const double n = double(points_.size()), variance = ss - s * s / n;
-    return variance > 0 && norm_ > 0 ? st / std::sqrt(variance * norm_) : 0;
+  double correlation(const cv::Mat1f& image, const cv::Matx33f& w) const {
+    if (!inside(image, w)) return correlation_of(w, [&](float x, float y) { return bilinear_at(image, x, y); });
+    // Every sample well inside: the same sums without the clamps at the image's edges.
+    const float* data = image[0];
+    const std::size_t step = image.step1();
+    return correlation_of(w, [&](float x, float y) {
+      const int x0 = int(x), y0 = int(y);
+      const float fx = x - x0, fy = y - y0;
+      const float* a = data + std::size_t(y0) * step + x0;
+      const float* b = a + step;
+      return (1 - fy) * ((1 - fx) * a[0] + fx * a[1]) + fy * ((1 - fx) * b[0] + fx * b[1]);
+    });
   }
 
  private:
@@ -175,6 +158,21 @@ class SparseTemplate {
   }
 
   SparseTemplate() = default;
+
+  // The correlation of the points' values with the image's grey levels at the points
+  // under `w`, sampled by `sample(x, y)`.
+  template <typename Sample>
+  double correlation_of(const cv::Matx33f& w, Sample sample) const {
+    double s = 0, ss = 0, st = 0;
+    for (const Point& p : points_) {
+      const float z = w(2, 0) * p.x + w(2, 1) * p.y + w(2, 2);
+      if (!(std::abs(z) > 1e-12f)) return 0;
+      const double g = sample((w(0, 0) * p.x + w(0, 1) * p.y + w(0, 2)) / z, (w(1, 0) * p.x + w(1, 1) * p.y + w(1, 2)) / z);
+      s += g, ss += g * g, st += g * p.value;
+    }
+    const double n = double(points_.size()), variance = ss - s * s / n;
+    return variance > 0 && norm_ > 0 ? st / std::sqrt(variance * norm_) : 0;
+  }
 
   // Whether `w` takes the box of the points well inside the image, where no bilinear
   // sample needs clamping: a homography positive over a box maps it to the quadrilateral
