@@ -51,7 +51,7 @@ GstVideoOverlayRectangle* overlay_rectangle(const cv::Mat4b& layer, const cv::Re
 
 GstVideoOverlayComposition* DetectOverlay::compose(int width, int height, const DrawOptions& options,
                                                    const Camera& camera, const std::vector<Detection>& detections) {
-  if (layer_.rows != height || layer_.cols != width) layer_ = cv::Mat4b::zeros(height, width);
+  if (layer_.rows != height || layer_.cols != width) layer_ = cv::Mat4b(height, width, cv::Vec4b::all(0));
   GstVideoOverlayComposition* composition = gst_video_overlay_composition_new(nullptr);
   for (const Detection& d : detections) {
     cv::Mat layer = layer_;

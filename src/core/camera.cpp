@@ -73,7 +73,7 @@ void Camera::save(const std::string& path) const {
   if (width > 0) fs << "image_width" << width;
   if (height > 0) fs << "image_height" << height;
   fs << "camera_matrix" << cv::Mat(matrix());
-  fs << "distortion_coefficients" << (distortion.empty() ? cv::Mat::zeros(1, 5, CV_64F) : distortion_mat());
+  fs << "distortion_coefficients" << (distortion.empty() ? cv::Mat(1, 5, CV_64F, cv::Scalar(0)) : distortion_mat());
 }
 
 Camera Camera::for_frame(int frame_width, int frame_height) const {

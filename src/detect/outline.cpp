@@ -368,7 +368,7 @@ double edge_direction(const cv::Mat1f& image) {
 cv::Mat1f smear_kernel(cv::Point2d along) {
   const double length = cv::norm(along);
   const int half = int(std::ceil(length / 2)) + 1;
-  cv::Mat1f k = cv::Mat1f::zeros(2 * half + 1, 2 * half + 1);
+  cv::Mat1f k(2 * half + 1, 2 * half + 1, 0.f);
   const int steps = std::max(2, int(std::ceil(length * 4)));
   for (int i = 0; i <= steps; ++i) {  // bilinear splats of points along the segment
     const cv::Point2d p = cv::Point2d(half, half) + along * (double(i) / steps - 0.5);
@@ -383,7 +383,7 @@ cv::Mat1f smear_kernel(cv::Point2d along) {
 // `image` convolved with a smear kernel (zero outside): a kernel along a line is mostly
 // zeros, and adding shifted copies for its few taps costs less than filter2D's transform.
 cv::Mat1f smeared_by(const cv::Mat1f& image, const cv::Mat1f& kernel) {
-  cv::Mat1f out = cv::Mat1f::zeros(image.size());
+  cv::Mat1f out(image.size(), 0.f);
   const int ay = kernel.rows / 2, ax = kernel.cols / 2;
   for (int ky = 0; ky < kernel.rows; ++ky)
     for (int kx = 0; kx < kernel.cols; ++kx) {
@@ -426,7 +426,7 @@ class PixelModel {
     if (box_.area() == 0 || box_.area() > kMaxPixels) return;
     grey_.create(box_.size());
     use_.create(box_.size());
-    fixed_ = cv::Mat1f::zeros(box_.size());
+    fixed_ = cv::Mat1f(box_.size(), 0.f);
     for (int g = 0; g < family.cell_count(); ++g) {
       if (family.is_baseline(g)) continue;
       cells_.push_back(g);
@@ -444,7 +444,7 @@ class PixelModel {
         return;
       }
       std::array<Coverage, 4>& squares = squares_.emplace_back();
-      for (Coverage& c : squares) c.rect = r, c.share = cv::Mat1f::zeros(r.size());
+      for (Coverage& c : squares) c.rect = r, c.share = cv::Mat1f(r.size(), 0.f);
     }
     // Area shares by supersampling each pixel (about four samples per unit).
     const int k = std::clamp(int(std::ceil(4 / pixels_per_unit)), 2, 8);

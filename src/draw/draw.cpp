@@ -63,7 +63,7 @@ void label(cv::Mat& image, const std::string& text, const Detection& d, double h
   const cv::Rect box(x - pad, y - size.height - pad, size.width + 2 * pad, size.height + base + 2 * pad);
   const cv::Rect inside = box & cv::Rect(0, 0, image.cols, image.rows);
   if (inside.empty()) return;
-  cv::Mat1b glyphs = cv::Mat1b::zeros(box.size()), outline;
+  cv::Mat1b glyphs(box.size(), uchar(0)), outline;
   cv::putText(glyphs, text, cv::Point(x, y) - box.tl(), cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(255), thick,
               cv::LINE_AA);
   cv::dilate(glyphs, outline, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * width + 1, 2 * width + 1)));
