@@ -203,6 +203,39 @@ class SparseTemplate {
   double norm_ = 0;
 };
 
+// The sharp structure of `family`, drawn once per thread.
+const cv::Mat1f& sharp_structure(const Family& family) {
+  thread_local std::array<cv::Mat1f, Family::kMaxN + 1> sharp;
+  if (sharp[family.n()].empty()) sharp[family.n()] = structure_template(family);
+  return sharp[family.n()];
+}
+
+// The blur, in template pixels, of a structure seen at `per_unit` pixels per unit.
+double template_blur(double per_unit) { return 0.4 / std::min(per_unit, kTemplateScale) * kTemplateScale; }
+
+// The structure blurred as seen at `per_unit` pixels per unit, and its sparse samples.
+struct BlurredStructure {
+  cv::Mat1f image;
+  SparseTemplate sparse;
+};
+
+BlurredStructure blurred_structure(const Family& family, double per_unit) {
+  const double sigma = template_blur(per_unit);
+  const auto draw = [&] {
+    cv::Mat1f image = sharp_structure(family).clone();
+    if (sigma > 0.3) cv::GaussianBlur(image, image, cv::Size(), sigma);
+    return BlurredStructure{image, SparseTemplate(image, 3)};
+  };
+  // Every crop of kTemplateScale pixels per unit or more is read with the same blur, the
+  // one of the template's own resolution: drawn once per thread (most outline reads of a
+  // frame crowded with other markers are of that kind, and drawing it cost them a fifth).
+  if (per_unit < kTemplateScale) return draw();
+  thread_local std::array<std::optional<BlurredStructure>, Family::kMaxN + 1> resolved;
+  std::optional<BlurredStructure>& cached = resolved[family.n()];
+  if (!cached) cached = draw();
+  return *cached;
+}
+
 // Units -> template pixels (pixel centres at whole numbers).
 cv::Matx33d unit_to_template() {
   const double o = kRing * kTemplateScale - 0.5;
@@ -808,12 +841,11 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   const double zx = double(crop.cols) / box.width, zy = double(crop.rows) / box.height;
   const cv::Matx33d to_frame(1 / zx, 0, 0.5 / zx - 0.5 + box.x, 0, 1 / zy, 0.5 / zy - 0.5 + box.y, 0, 0, 1);
 
-  // The sharp template of each family is drawn once per thread.
-  thread_local std::array<cv::Mat1f, Family::kMaxN + 1> sharp;
-  if (sharp[family.n()].empty()) sharp[family.n()] = structure_template(family);
-  cv::Mat1f templ = sharp[family.n()].clone();
-  const double sigma = 0.4 / std::min(per_unit, kTemplateScale) * kTemplateScale;  // template pixels
-  if (sigma > 0.3) cv::GaussianBlur(templ, templ, cv::Size(), sigma);
+  // The template: the structure blurred to the crop's resolution (read only from here on).
+  const double sigma = template_blur(per_unit);
+  const BlurredStructure structure = blurred_structure(family, per_unit);
+  const cv::Mat1f& templ = structure.image;
+  const SparseTemplate& sparse = structure.sparse;
   const cv::Matx33d to_template = unit_to_template();
   const cv::Matx33d from_frame = to_frame.inv();
   const std::vector<std::array<cv::Point2d, 4>> outlines = plausible_outlines(coarse, side, edge_angle);
@@ -832,7 +864,6 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     w.convertTo(w, CV_32F);
     return w;
   };
-  const SparseTemplate sparse(templ, 3);
   std::array<cv::Point2d, 4> start;
   double start_correlation = -1;
   for (const auto& outline : outlines)
@@ -895,7 +926,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     std::vector<SparseTemplate>& smeared = smeared_structures[family.n()];
     if (smeared.empty()) {
       cv::Mat1f blurred;
-      cv::GaussianBlur(sharp[family.n()], blurred, cv::Size(), 0.5);
+      cv::GaussianBlur(sharp_structure(family), blurred, cv::Size(), 0.5);
       std::vector<double> lengths;  // template pixels
       for (double units = 1.5; units <= kMaxSmear + 1; units += 1.5) lengths.push_back(units * kTemplateScale);
       for (int a = 0; a < 8; ++a)
