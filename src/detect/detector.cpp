@@ -383,7 +383,9 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   // The second look, around clusters that no detection covers.
   if (p.second_look) {
     start = Clock::now();
-    const detail::SecondLook look;
+    detail::SecondLook look;
+    look.max_n = 0;
+    for (const Family& f : p.families) look.max_n = std::max(look.max_n, f.n());
     std::vector<cv::Rect> taken;
     for (const Detection& d : found)
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));

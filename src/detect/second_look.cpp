@@ -11,6 +11,7 @@
 // clusters are enlarged, binarised at the midpoint of their own dark and bright levels
 // and handed to the usual stages, with every measurement taken back to the frame.
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 
 #include <opencv2/imgproc.hpp>
@@ -24,6 +25,7 @@ struct Cluster {
   int x0, y0, x1, y1;  // inclusive box
   int ink = 0;         // black pixels of its regions
   int pieces = 0;      // its black regions and their holes
+  bool larger_marker = false;  // one of its regions is a larger family's marker
 };
 
 int find_root(std::vector<int>& parent, int i) {
@@ -91,6 +93,39 @@ bool lines_opposite_sides(const RegionTree& tree, int hole) {
   return rows >= 0.8 * h || cols >= 0.8 * w;
 }
 
+// The largest hole of black region r.
+int largest_hole(const RegionTree& tree, int r) {
+  int hole = -1;
+  for (int i = 0; i < tree.regions[r].child_count; ++i)
+    if (hole < 0 || tree.regions[tree.children_of(r)[i]].area > tree.regions[hole].area) hole = tree.children_of(r)[i];
+  return hole;
+}
+
+// Whether black region r is a marker of a family larger than every one sought, resolved:
+// its largest hole holds exactly m x m squares, m > max_n, of about one size (within the
+// spread of a steep perspective) and each of kMinSquarePixels or more. Blur only joins a
+// resolved marker's squares, so no second look makes that an n x n marker, n <= max_n.
+// Small markers are another matter: in the range sweep a 3x3 marker of 31 px (1.3 px per
+// unit) showed 16 pieces of 2 to 15 pixels in its hole, its squares broken by the mean
+// threshold; and a large square hollowed by it breaks into pieces of unequal sizes. The
+// other families' markers of the speed scenes (70 px and more) have squares of 16 pixels
+// or more (a bound of 25 lets some of them through again).
+constexpr int kMinSquarePixels = 16;
+
+bool is_larger_marker(const RegionTree& tree, int r, int max_n) {
+  const int hole = largest_hole(tree, r);
+  if (hole < 0) return false;
+  const Region& white = tree.regions[hole];
+  const int m = int(std::lround(std::sqrt(double(white.child_count))));
+  if (m <= max_n || m > Family::kMaxN || m * m != white.child_count) return false;
+  int smallest = white.area, largest = 0;
+  for (int i = 0; i < white.child_count; ++i) {
+    const int area = tree.regions[tree.children_of(hole)[i]].area;
+    smallest = std::min(smallest, area), largest = std::max(largest, area);
+  }
+  return smallest >= kMinSquarePixels && 3 * smallest >= largest;
+}
+
 }  // namespace
 
 std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const SecondLook& look,
@@ -104,7 +139,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const Region& g = tree.regions[r];
     if (!g.black || g.area < 2) continue;
     if (g.x1 - g.x0 + 1 > look.max_size || g.y1 - g.y0 + 1 > look.max_size) continue;
-    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count});
+    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count, is_larger_marker(tree, r, look.max_n)});
   }
   std::vector<int> parent(small.size());
   std::iota(parent.begin(), parent.end(), 0);
@@ -132,6 +167,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     c.x1 = std::max(c.x1, g.x1), c.y1 = std::max(c.y1, g.y1);
     c.ink += g.ink;
     c.pieces += g.pieces;
+    c.larger_marker = c.larger_marker || g.larger_marker;
   }
 
   std::vector<std::pair<double, cv::Rect>> found;  // ring ink, box
@@ -152,7 +188,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     // photos, about 2 in 1,000 pass.
     if (!marker_sized(w, h)) continue;
     const double fill = double(c.ink) / (w * h);
-    if (fill < 0.35 || fill > 0.8 || c.pieces < 4) continue;
+    if (fill < 0.35 || fill > 0.8 || c.pieces < 4 || c.larger_marker) continue;
     const double ring = ring_ink(binary, c);
     if (ring > 0.25) continue;
     const cv::Rect box(c.x0, c.y0, w, h);
@@ -167,10 +203,9 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     if (!g.black || g.child_count == 0) continue;
     const int w = g.x1 - g.x0 + 1, h = g.y1 - g.y0 + 1;
     if (!marker_sized(w, h)) continue;
+    if (is_larger_marker(tree, r, look.max_n)) continue;
     // Its largest hole with what the hole holds: the marker inside its border.
-    int hole = -1;
-    for (int i = 0; i < g.child_count; ++i)
-      if (hole < 0 || tree.regions[tree.children_of(r)[i]].area > tree.regions[hole].area) hole = tree.children_of(r)[i];
+    const int hole = largest_hole(tree, r);
     const Region& white = tree.regions[hole];
     int inside = white.area, squares = 0;
     for (int i = 0; i < white.child_count; ++i) {

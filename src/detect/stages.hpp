@@ -170,11 +170,13 @@ struct SecondLook {
   int min_size = 6;   // frame pixels, the cluster's longer side
   int max_size = 192;
   int enlarge_below = 64;  // clusters smaller than this are enlarged twice
+  int max_n = Family::kMaxN;  // the largest n of the families sought
 };
 
 // Boxes of small isolated clusters of black regions, part ink and part paper, that touch
 // none of the `taken` boxes: where a marker may be that the binary image did not resolve.
-// The most isolated (the whitest ring around the box) come first.
+// Resolved markers of families larger than `look.max_n` are not. The most isolated (the
+// whitest ring around the box) come first.
 std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const SecondLook& look,
                                       const std::vector<cv::Rect>& taken);
 

@@ -13,11 +13,22 @@ using namespace lftag;
 
 namespace {
 
-std::vector<cv::Rect> clusters_of(const cv::Mat1b& black, const std::vector<cv::Rect>& taken = {}) {
+std::vector<cv::Rect> clusters_of(const cv::Mat1b& black, const std::vector<cv::Rect>& taken = {},
+                                  const detail::SecondLook& look = {}) {
   const detail::BinaryImage binary = test::binary_from_mask(black);
   detail::RegionTree tree;
   detail::RegionLabeller().label(binary, tree);
-  return detail::near_candidates(tree, binary, detail::SecondLook{}, taken);
+  return detail::near_candidates(tree, binary, look, taken);
+}
+
+// The binary image of a resolved `family` marker, `scale` pixels per unit, at (x, y) on
+// white: 255 where black.
+cv::Mat1b resolved_marker(const Family& family, int scale, cv::Size size, int x, int y) {
+  cv::Mat1b units = family.unit_bitmap(TagId(0)), pixels;
+  cv::resize(units, pixels, cv::Size(), scale, scale, cv::INTER_NEAREST);
+  cv::Mat1b black(size, std::uint8_t(0));
+  black(cv::Rect(x, y, pixels.cols, pixels.rows)).setTo(255, pixels < 128);
+  return black;
 }
 
 // A far marker as its binary image shows it: half ink, in pieces that touch only at
@@ -128,6 +139,45 @@ TEST(NearCandidates, ABorderWithItsSquaresSmearedIntoItIsLookedAt) {
   cv::Mat1b one_side = black.clone();
   one_side(cv::Rect(66, 24, 11, 40)).setTo(255);  // the right gap filled on most rows
   EXPECT_TRUE(clusters_of(one_side).empty());
+}
+
+TEST(NearCandidates, ResolvedMarkersOfLargerFamiliesAreNot) {
+  // A 4x4 and a 5x5 marker that the binary image resolved, every square apart: sought
+  // with families up to 3x3, no second look can make either a 3x3 (blur only joins
+  // squares), so neither is looked at; with 4x4 sought the 4x4 is, and with every family
+  // both are.
+  const Family four(4), five(5);
+  const cv::Mat1b black = resolved_marker(four, 3, cv::Size(400, 200), 20, 40) |
+                          resolved_marker(five, 3, cv::Size(400, 200), 220, 40);
+  detail::SecondLook upto3, upto4;
+  upto3.max_n = 3, upto4.max_n = 4;
+  EXPECT_TRUE(clusters_of(black, {}, upto3).empty());
+  const std::vector<cv::Rect> four_only = clusters_of(black, {}, upto4);
+  ASSERT_EQ(four_only.size(), 1u);
+  EXPECT_EQ(four_only[0], cv::Rect(20, 40, 3 * four.side(), 3 * four.side()));
+  EXPECT_EQ(clusters_of(black).size(), 2u);
+  // Sixteen pieces of very unequal sizes in the hole (a 3x3 marker's large squares
+  // broken up, say) are no 4x4 marker: looked at with families up to 3x3.
+  cv::Mat1b broken = resolved_marker(four, 3, cv::Size(400, 200), 20, 40);
+  const cv::Rect first_square(20 + 3 * 4, 40 + 3 * 4, 12, 12);
+  cv::Mat1b square = broken(first_square);
+  ASSERT_EQ(cv::countNonZero(square), 144);  // the top-left baseline square, whole
+  square.setTo(0);
+  square(cv::Rect(5, 5, 2, 2)).setTo(255);  // a speck where it was
+  EXPECT_EQ(clusters_of(broken, {}, upto3).size(), 1u);
+  // A small 3x3 marker whose squares the mean threshold broke (as one of 31 px did in the
+  // range sweep): 4 x 4 pieces of 3 x 3 pixels in its hole. Too small to be a 4x4
+  // marker's squares: looked at.
+  cv::Mat1b small(100, 100, std::uint8_t(0));
+  small(cv::Rect(30, 30, 32, 32)).setTo(255);
+  small(cv::Rect(32, 32, 28, 28)).setTo(0);
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) small(cv::Rect(34 + 7 * j, 34 + 7 * i, 3, 3)).setTo(255);
+  EXPECT_EQ(clusters_of(small, {}, upto3).size(), 1u);
+  // The same with pieces of 4 x 4 pixels: a 4x4 marker's squares.
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) small(cv::Rect(34 + 7 * j, 34 + 7 * i, 4, 4)).setTo(255);
+  EXPECT_TRUE(clusters_of(small, {}, upto3).empty());
 }
 
 TEST(SecondLookPatch, ReopensOnePixelGapsBesideABrightMargin) {
