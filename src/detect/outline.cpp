@@ -228,7 +228,8 @@ BlurredStructure blurred_structure(const Family& family, double per_unit) {
   };
   // Every crop of kTemplateScale pixels per unit or more is read with the same blur, the
   // one of the template's own resolution: drawn once per thread (most outline reads of a
-  // frame crowded with other markers are of that kind, and drawing it cost them a fifth).
+  // frame crowded with other markers are of that kind; drawing it each time cost 2 % of
+  // such a frame's instructions).
   if (per_unit < kTemplateScale) return draw();
   thread_local std::array<std::optional<BlurredStructure>, Family::kMaxN + 1> resolved;
   std::optional<BlurredStructure>& cached = resolved[family.n()];
