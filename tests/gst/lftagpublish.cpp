@@ -91,12 +91,29 @@ std::vector<nlohmann::json> read_lines(const std::string& path) {
   return lines;
 }
 
-std::string temp_path(const char* name) {
-  gchar* dir = g_dir_make_tmp("lftagpublish-XXXXXX", nullptr);
-  const std::string path = std::string(dir) + "/" + name;
-  g_free(dir);
-  return path;
-}
+// A scratch directory, removed with whatever the test wrote in it.
+class ScratchDir {
+ public:
+  ScratchDir() {
+    gchar* dir = g_dir_make_tmp("lftagpublish-XXXXXX", nullptr);
+    fail_unless(dir != nullptr);
+    dir_ = dir;
+    g_free(dir);
+  }
+  ~ScratchDir() {
+    if (GDir* dir = g_dir_open(dir_.c_str(), 0, nullptr)) {
+      while (const gchar* name = g_dir_read_name(dir)) g_unlink(path(name).c_str());
+      g_dir_close(dir);
+    }
+    g_rmdir(dir_.c_str());
+  }
+  ScratchDir(const ScratchDir&) = delete;
+  ScratchDir& operator=(const ScratchDir&) = delete;
+  std::string path(const std::string& name) const { return dir_ + "/" + name; }
+
+ private:
+  std::string dir_;
+};
 
 nlohmann::json time_json(GstClockTime t) {
   return GST_CLOCK_TIME_IS_VALID(t) ? nlohmann::json(std::uint64_t(t)) : nlohmann::json(nullptr);
@@ -133,7 +150,8 @@ void expect_lines_match(const std::vector<nlohmann::json>& lines, const Run& run
 }  // namespace
 
 GST_START_TEST(test_file_matches_metas) {
-  const std::string path = temp_path("d.jsonl");
+  const ScratchDir scratch;
+  const std::string path = scratch.path("d.jsonl");
   Run run;
   run_pipeline("lftagtestsrc num-buffers=12 ids=6789,42 ! lftagdetect ! lftagpublish location=" + path +
                    " ! fakesink name=sink",
@@ -150,13 +168,13 @@ GST_START_TEST(test_file_matches_metas) {
   }
   fail_unless_equals_uint64(lines[3]["pts"].get<std::uint64_t>(), gst_util_uint64_scale(3, GST_SECOND, 30));
   fail_unless(run.warnings.empty());
-  g_unlink(path.c_str());
 }
 GST_END_TEST;
 
 // Appending adds to the file; otherwise it is replaced.
 GST_START_TEST(test_append) {
-  const std::string path = temp_path("a.jsonl");
+  const ScratchDir scratch;
+  const std::string path = scratch.path("a.jsonl");
   const std::string launch = "lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish location=" + path;
   Run first, second, third;
   run_pipeline(launch + " ! fakesink name=sink", first);
@@ -164,14 +182,14 @@ GST_START_TEST(test_append) {
   fail_unless_equals_int(read_lines(path).size(), 6);
   run_pipeline(launch + " ! fakesink name=sink", third);
   fail_unless_equals_int(read_lines(path).size(), 3);
-  g_unlink(path.c_str());
 }
 GST_END_TEST;
 
 // Unset, empty or "-": the standard output.
 GST_START_TEST(test_stdout) {
   for (const char* location : {"", " location=-", " location=\"\""}) {
-    const std::string path = temp_path("stdout.jsonl");
+    const ScratchDir scratch;
+    const std::string path = scratch.path("stdout.jsonl");
     fflush(stdout);
     const int saved = dup(STDOUT_FILENO);
     FILE* capture = fopen(path.c_str(), "w");
@@ -185,7 +203,6 @@ GST_START_TEST(test_stdout) {
     close(saved);
     fclose(capture);
     expect_lines_match(read_lines(path), run);
-    g_unlink(path.c_str());
   }
 }
 GST_END_TEST;
@@ -216,7 +233,8 @@ GST_END_TEST;
 // The meta is kept by a video encoder and by a decoder fed by it: lftagpublish after them
 // writes every frame. Read back from a file it is gone, and the element says so once.
 GST_START_TEST(test_after_encode_and_decode) {
-  const std::string path = temp_path("coded.jsonl");
+  const ScratchDir scratch;
+  const std::string path = scratch.path("coded.jsonl");
   Run run;
   run_pipeline("lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect ! videoconvert ! vp8enc deadline=1 ! "
                "lftagpublish location=" + path + ".encoded ! vp8dec ! lftagpublish location=" + path +
@@ -244,15 +262,13 @@ GST_START_TEST(test_after_encode_and_decode) {
   gst_message_parse_warning(muxed.warnings[0], &error, nullptr);
   fail_unless(std::string(error->message).find("without LFTagMeta") != std::string::npos, "%s", error->message);
   g_error_free(error);
-  g_unlink(path.c_str());
-  g_unlink((path + ".encoded").c_str());
-  g_unlink(video.c_str());
 }
 GST_END_TEST;
 
 // After a seek the running time starts again at 0 while pts and stream time go on.
 GST_START_TEST(test_times_after_seek) {
-  const std::string path = temp_path("seek.jsonl");
+  const ScratchDir scratch;
+  const std::string path = scratch.path("seek.jsonl");
   GstElement* pipeline = gst_parse_launch(
       ("lftagtestsrc count=1 ! lftagdetect ! lftagpublish location=" + path + " ! fakesink").c_str(), nullptr);
   fail_unless(gst_element_set_state(pipeline, GST_STATE_PAUSED) == GST_STATE_CHANGE_ASYNC);
@@ -272,7 +288,6 @@ GST_START_TEST(test_times_after_seek) {
   fail_unless_equals_uint64(after["pts"].get<std::uint64_t>(), 2 * GST_SECOND);
   fail_unless_equals_uint64(after["stream_time"].get<std::uint64_t>(), 2 * GST_SECOND);
   fail_unless_equals_uint64(after["running_time"].get<std::uint64_t>(), 0);
-  g_unlink(path.c_str());
 }
 GST_END_TEST;
 
