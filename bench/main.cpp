@@ -35,7 +35,7 @@ int run(int argc, char** argv) {
   CLI::App app("Benchmarks of fiducial systems on the same rendered and real frames.");
   bench::Options options;
   std::vector<std::string> names;
-  std::string systems, out = "bench-results", data = "/usr/share/doc/opencv-doc/examples/data";
+  std::string systems, save_misses, out = "bench-results", data = "/usr/share/doc/opencv-doc/examples/data";
   bool list = false;
   options.threads = int(std::max(1u, std::thread::hardware_concurrency()));
   app.add_option("experiments", names, "Experiments to run (default: all; see --list)");
@@ -46,6 +46,8 @@ int run(int argc, char** argv) {
   app.add_option("--threads", options.threads, "Worker threads for the accuracy experiments; timing uses one")
       ->check(CLI::Range(1, 64));
   app.add_option("--seed", options.seed, "Seed of every random choice (default 1)");
+  app.add_option("--save-misses", save_misses,
+                 "Write each video frame where a system missed a marker to this directory (PNG)");
   app.add_flag("--list", list, "List experiments and systems, then exit");
   CLI11_PARSE(app, argc, argv);
 
@@ -64,7 +66,9 @@ int run(int argc, char** argv) {
   options.systems = bench::select_systems(systems);
   options.out = out;
   options.data = data;
+  options.save_misses = save_misses;
   std::filesystem::create_directories(options.out);
+  if (!save_misses.empty()) std::filesystem::create_directories(save_misses);
   // OpenCV's own threads would blur timings and compete with ours.
   cv::setNumThreads(1);
 

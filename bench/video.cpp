@@ -255,6 +255,20 @@ std::string bin_name(const std::vector<double>& edges, int b) {
   return text(edges[b]) + "-" + text(edges[b + 1]);
 }
 
+// The frame as the system saw it, for a look at what it missed: named by system, clip
+// and frame, with each missed slot and the image point of its centre in the name.
+void save_miss(const std::filesystem::path& dir, const std::string& system, const Job& job, const cv::Mat1b& image,
+               const std::vector<cv::Point2d>& centers, const std::vector<Seen>& seen) {
+  std::string name = system + "-clip" + std::to_string(job.clip) + "-frame" + std::to_string(job.frame);
+  for (int m = 0; m < kMarkers; ++m)
+    if (!seen[m].found) {
+      const cv::Point2d& c = centers[m];
+      name += "-missed" + std::to_string(m) + "@" + std::to_string(int(std::lround(c.x))) + "," +
+              std::to_string(int(std::lround(c.y)));
+    }
+  cv::imwrite((dir / (name + ".png")).string(), image);
+}
+
 }  // namespace
 
 bool run_video(const Options& options) {
@@ -347,6 +361,8 @@ bool run_video(const Options& options) {
           out[m].translation_m = o.translation_error_m;
           out[m].depth_m = o.depth_error_m;
         }
+        if (!options.save_misses.empty() && std::any_of(out.begin(), out.end(), [](const Seen& o) { return !o.found; }))
+          save_miss(options.save_misses, options.systems[s], jobs[j], image, centers, out);
         // score() counts the other markers' detections as wrong for each marker; in a frame
         // of several, a detection is wrong when it is none of them. It is charged to the
         // marker it lies nearest.
