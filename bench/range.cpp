@@ -4,6 +4,8 @@
 // rotation and sub-pixel offset, 30 markers per family, stepped away until a system
 // finds nothing for a while. First-missed and 20 %-missed distances per system; wrong
 // ids are counted apart, never as found.
+#include <cmath>
+
 #include "csv.hpp"
 #include "experiment.hpp"
 #include "systems.hpp"
@@ -48,7 +50,12 @@ bool run_range(const Options& options) {
           const double roll = std::uniform_real_distribution<double>(0, 360)(rng);
           const cv::Vec3d rvec = lftag::rotation_from_angles(roll, 0, 0);
           const Pose pose = place(camera, jittered_center(camera, rng), distances[step], rvec);
-          return run_trial(system, renderer, ids[m], 1.0, pose);
+          const std::filesystem::path missed =
+              options.save_misses.empty()
+                  ? std::filesystem::path()
+                  : options.save_misses / (system.name() + "-range-" + std::to_string(int(std::lround(distances[step] * 10))) +
+                                           "dm-marker" + std::to_string(m) + ".png");
+          return run_trial(system, renderer, ids[m], 1.0, pose, missed);
         },
         after_empty_steps(plan.empty_steps));
     progress("range: " + system.name() + " done");

@@ -4,6 +4,7 @@
 #include <algorithm>
 
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 namespace bench {
 
@@ -63,9 +64,11 @@ Outcome score(const std::vector<Detected>& detections, const std::string& id, co
 }
 
 Outcome run_trial(FiducialSystem& system, const lftag::SceneRenderer& renderer, const std::string& id,
-                  double tag_size, const Pose& pose) {
+                  double tag_size, const Pose& pose, const std::filesystem::path& save_if_missed) {
   const cv::Mat1b image = renderer.render({system.target(id, tag_size, pose.rvec, pose.tvec)});
-  return score(system.detect(image), id, pose, tag_size, renderer.params().camera);
+  const Outcome outcome = score(system.detect(image), id, pose, tag_size, renderer.params().camera);
+  if (!outcome.found && !save_if_missed.empty()) cv::imwrite(save_if_missed.string(), image);
+  return outcome;
 }
 
 std::vector<Step> sweep(const std::vector<double>& values, int markers,

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cmath>
+#include <filesystem>
 #include <functional>
 #include <limits>
 #include <random>
@@ -46,9 +47,10 @@ Outcome score(const std::vector<Detected>& detections, const std::string& id, co
               const lftag::Camera& camera);
 
 // Renders marker `id` of `system` alone with `pose`, detects it and scores the result.
-// The system must have been given the renderer's camera and `tag_size`.
+// The system must have been given the renderer's camera and `tag_size`. When the marker
+// is not found and `save_if_missed` is set, the frame is written there.
 Outcome run_trial(FiducialSystem& system, const lftag::SceneRenderer& renderer, const std::string& id,
-                  double tag_size, const Pose& pose);
+                  double tag_size, const Pose& pose, const std::filesystem::path& save_if_missed = {});
 
 // Angle between two rotations, degrees.
 double rotation_error_deg(const cv::Vec3d& rvec_a, const cv::Vec3d& rvec_b);

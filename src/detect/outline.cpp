@@ -13,6 +13,7 @@
 // levels best. Every check is measured against the marker's own levels and units, so it
 // means the same at every size and under every blur.
 #include <algorithm>
+#include <cstdlib>
 #include <cmath>
 #include <limits>
 
@@ -27,6 +28,12 @@ namespace {
 
 constexpr double kTemplateScale = 3;  // template pixels per unit
 constexpr double kRing = 1;           // units of the white margin the template assumes outside
+// Defocus blurs sought beyond the template's own, Gaussian sigmas in units.
+constexpr std::array<double, 3> kDefocusUnits = {0.7, 1.1, 1.5};
+// A defocused reading's least worsening of the fit, over its residuals' variance: a
+// runner-up 5 standard deviations of the noise away. Measured: true readings 17 to 900,
+// misreadings of dim (25 grey levels) defocused markers 7 to 10.
+constexpr double kMinNoiseMargin = 25;
 
 // The fixed structure along one axis of the marker: 0 black, 1 white, 0.5 a data strip.
 double axis_class(double u, int side) {
@@ -203,6 +210,19 @@ class SparseTemplate {
   double norm_ = 0;
 };
 
+// A template blurred by a Gaussian of `sigma` template pixels. With `paper_beyond`, as the
+// frame blurs the marker: beyond its white ring the paper stays white. Without, the ring
+// is mirrored there and brings the border back outside it, as the checks of the sharper
+// readings were measured with. Under a defocus that matters: the alignment shrank a
+// marker by 0.7 px of 22 to match at a blur of 1.4 units, 3 % of its distance. (White
+// paper for every reading moved the range sweep's limits both ways, one 3x3 at 26.1 m
+// under the margin bound and a fifth of them further out: left for a recalibration.)
+cv::Mat1f blurred_template(const cv::Mat1f& sharp, double sigma, bool paper_beyond = false) {
+  cv::Mat1f out;
+  cv::GaussianBlur(sharp, out, cv::Size(), sigma, sigma, paper_beyond ? cv::BORDER_REPLICATE : cv::BORDER_REFLECT_101);
+  return out;
+}
+
 // The sharp structure of `family`, drawn once per thread.
 const cv::Mat1f& sharp_structure(const Family& family) {
   thread_local std::array<cv::Mat1f, Family::kMaxN + 1> sharp;
@@ -223,7 +243,7 @@ BlurredStructure blurred_structure(const Family& family, double per_unit) {
   const double sigma = template_blur(per_unit);
   const auto draw = [&] {
     cv::Mat1f image = sharp_structure(family).clone();
-    if (sigma > 0.3) cv::GaussianBlur(image, image, cv::Size(), sigma);
+    if (sigma > 0.3) image = blurred_template(image, sigma);
     return BlurredStructure{image, SparseTemplate(image, 3)};
   };
   // Every crop of kTemplateScale pixels per unit or more is read with the same blur, the
@@ -235,6 +255,24 @@ BlurredStructure blurred_structure(const Family& family, double per_unit) {
   std::optional<BlurredStructure>& cached = resolved[family.n()];
   if (!cached) cached = draw();
   return *cached;
+}
+
+// The contrast that a template of the structure shows where the reading measures it: the
+// middle of the white ring minus the cells' cores (1 when sharp, less when blurred).
+double structure_contrast(const cv::Mat1f& templ) {
+  const auto mean = [&](double x, double y, double w, double h) {  // units, to the nearest template pixel
+    const auto px = [](double u) { return int(std::lround(u * kTemplateScale)); };
+    return cv::mean(templ(cv::Rect(px(x + kRing), px(y + kRing), px(w), px(h))))[0];
+  };
+  const double side = std::round(templ.cols / kTemplateScale - 2 * kRing);
+  const int n = int(side) / 6 - 1;
+  double black = 0;
+  for (int r = 0; r < n; ++r)
+    for (int c = 0; c < n; ++c) black += mean(5 + 6 * c, 5 + 6 * r, 2, 2);
+  black /= n * n;
+  const double white = (mean(2.5, 2.5, side - 5, 1) + mean(2.5, side - 3.5, side - 5, 1) + mean(2.5, 3.5, 1, side - 7) +
+                        mean(side - 3.5, 3.5, 1, side - 7)) / 4;
+  return white - black;
 }
 
 // Units -> template pixels (pixel centres at whole numbers).
@@ -528,6 +566,9 @@ class PixelModel {
     TagId id;
     double margin = 0;
     double smear = 0;  // length of the motion blur that fits best, frame pixels
+    // The same least worsening over the variance of the best fit's residuals (noise and
+    // misfit): how far above what the frame's noise can do alone the reading stands.
+    double noise_margin = 0;
   };
 
   // The id whose predicted pixels fit the grey levels best (least squares with the
@@ -536,7 +577,7 @@ class PixelModel {
   // least margin over the data cells: how much worse the runner-up position of its square
   // fits, per pixel of a cell over the contrast squared.
   Reading read(TagId start, double pixels_per_unit, double contrast) const {
-    Reading best{start, 0, 0};
+    Reading best{start, 0, 0, 0};
     double best_rss = std::numeric_limits<double>::infinity();
     const bool smeared = smear_ != cv::Point2d();
     // With a motion blur, which dominates, only the lesser optical blurs are tried.
@@ -557,7 +598,7 @@ class PixelModel {
         if (fit.rss < best_rss) {
           best_rss = fit.rss;
           best = {fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
-                  cv::norm(smear_) * scale};
+                  cv::norm(smear_) * scale, fit.rss > 0 ? fit.least_gain / (fit.rss / fit.samples) : 0};
           if (!(fit.ink > 0.4 * contrast)) best.margin = 0;
         }
       }
@@ -584,7 +625,7 @@ class PixelModel {
   };
   struct Fit {
     TagId id;
-    double rss = 0, ink = 0, least_gain = 0;
+    double rss = 0, ink = 0, least_gain = 0, samples = 0;
   };
 
   // The fit from `start` with the coverage (`fixed`, `smeared_squares`: smeared already)
@@ -643,6 +684,7 @@ class PixelModel {
     }
     Fit fit;
     fit.rss = sums.rss(&fit.ink);
+    fit.samples = sums.n;
 
     fit.least_gain = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < cells_.size(); ++i) {
@@ -843,9 +885,9 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   const cv::Matx33d to_frame(1 / zx, 0, 0.5 / zx - 0.5 + box.x, 0, 1 / zy, 0.5 / zy - 0.5 + box.y, 0, 0, 1);
 
   // The template: the structure blurred to the crop's resolution (read only from here on).
-  const double sigma = template_blur(per_unit);
+  double sigma = template_blur(per_unit);
   const BlurredStructure structure = blurred_structure(family, per_unit);
-  const cv::Mat1f& templ = structure.image;
+  cv::Mat1f templ = structure.image;
   const SparseTemplate& sparse = structure.sparse;
   const cv::Matx33d to_template = unit_to_template();
   const cv::Matx33d from_frame = to_frame.inv();
@@ -926,8 +968,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     thread_local std::array<std::vector<SparseTemplate>, Family::kMaxN + 1> smeared_structures;
     std::vector<SparseTemplate>& smeared = smeared_structures[family.n()];
     if (smeared.empty()) {
-      cv::Mat1f blurred;
-      cv::GaussianBlur(sharp_structure(family), blurred, cv::Size(), 0.5);
+      const cv::Mat1f blurred = blurred_template(sharp_structure(family), 0.5);
       std::vector<double> lengths;  // template pixels
       for (double units = 1.5; units <= kMaxSmear + 1; units += 1.5) lengths.push_back(units * kTemplateScale);
       for (int a = 0; a < 8; ++a)
@@ -981,6 +1022,36 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     cv::filter2D(t, out, -1, kernel, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
     return out;
   };
+  // Defocus blurs a small marker by more than its pixels do, which the template does not
+  // either: a structure that correlates too little, or shows too little contrast, is tried
+  // blurred by more, and aligned again with the blur that correlates best when that beats
+  // `to_beat` (and the smears, below). `contrast_scale` then brings the contrast measured
+  // below to the one the template's own blur would show, for the contrast check; the
+  // margins stay measured against the contrast seen, as every other reading's are.
+  double contrast_scale = 1;
+  bool defocused = false;
+  const auto try_defocus = [&](double to_beat) {
+    double best = to_beat, best_sigma = 0;
+    cv::Mat1f best_template;
+    for (const double units : kDefocusUnits) {
+      const double blur = std::hypot(sigma, units * kTemplateScale);
+      const cv::Mat1f blurred = blurred_template(sharp_structure(family), blur, true);
+      if (const double c = SparseTemplate(blurred, 3).correlation(crop, warp); c > best)
+        best = c, best_sigma = blur, best_template = blurred;
+    }
+    if (best_template.empty()) return false;
+    cv::Mat again = warp.clone();
+    try {
+      const double c =
+          cv::findTransformECC(best_template, crop, again, cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
+      if (c <= correlation) return true;  // the sharper alignment stands, and no smear beats it
+      contrast_scale = structure_contrast(templ) / structure_contrast(best_template);
+      correlation = c, warp = again, templ = best_template, sigma = best_sigma, defocused = true;
+    } catch (const cv::Exception&) {
+      // the sharper alignment stands
+    }
+    return true;
+  };
   if (correlation < kMinCorrelation && correlation >= kMinSmearedCorrelation) {
     // Directions every 22.5 degrees and lengths every 1.5 units, then half steps around the
     // best (the image's own least-gradient direction snaps to the marker's axes when the
@@ -1003,7 +1074,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
         for (const double du : {-0.75, 0.0, 0.75})
           if (da != 0 || du != 0) try_smear(angle + da, units + du);
     }
-    if (best_along != cv::Point2d()) {
+    if (!try_defocus(best) && best_along != cv::Point2d()) {
       cv::Mat again = warp.clone();
       try {
         const double c = cv::findTransformECC(smeared(templ, template_kernel(warp, best_along)), crop, again,
@@ -1017,26 +1088,35 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       }
     }
   }
-  cv::Matx33d w;
-  cv::Mat(warp).convertTo(cv::Mat(3, 3, CV_64F, w.val), CV_64F);
-  const cv::Matx33d aligned = to_frame * w * to_template;  // units (some turn) -> frame pixels
-  if (!std::isfinite(aligned(2, 2)) || std::abs(aligned(2, 2)) < 1e-12) return std::nullopt;
+  cv::Matx33d w, aligned;  // units (some turn) -> frame pixels
+  // Its black and white under the alignment: the cores, and the middle of the white ring.
+  double black = 0, white = 0;
+  std::vector<std::vector<CellLevels>> levels(family.n(), std::vector<CellLevels>(family.n()));
+  const auto measure = [&] {
+    cv::Mat(warp).convertTo(cv::Mat(3, 3, CV_64F, w.val), CV_64F);
+    aligned = to_frame * w * to_template;
+    if (!std::isfinite(aligned(2, 2)) || std::abs(aligned(2, 2)) < 1e-12) return false;
+    black = 0;
+    for (int r = 0; r < family.n(); ++r)
+      for (int c = 0; c < family.n(); ++c) black += (levels[r][c] = cell_levels(image, aligned, r, c)).core;
+    black /= family.cell_count();
+    white = (mean_level(image, aligned, 2.5, 2.5, side - 5, 1) + mean_level(image, aligned, 2.5, side - 3.5, side - 5, 1) +
+             mean_level(image, aligned, 2.5, 3.5, 1, side - 7) + mean_level(image, aligned, side - 3.5, 3.5, 1, side - 7)) /
+            4;
+    return true;
+  };
+  if (!measure()) return std::nullopt;
+  // A structure that aligned well but shows little contrast may be a defocused marker too.
+  if (correlation >= kMinCorrelation && white - black < kMinContrast && white > black && !defocused &&
+      smear_crop == cv::Point2d() && try_defocus(sparse.correlation(crop, warp)) && defocused && !measure())
+    return std::nullopt;
 
   OutlineReading out;
   out.correlation = correlation;
   out.pixels_per_unit = smallest_scale(aligned, {side / 2.0, side / 2.0});
-  // Its black and white: the cores, and the middle of the white ring.
-  double black = 0, white = 0;
-  std::vector<std::vector<CellLevels>> levels(family.n(), std::vector<CellLevels>(family.n()));
-  for (int r = 0; r < family.n(); ++r)
-    for (int c = 0; c < family.n(); ++c) black += (levels[r][c] = cell_levels(image, aligned, r, c)).core;
-  black /= family.cell_count();
-  white = (mean_level(image, aligned, 2.5, 2.5, side - 5, 1) + mean_level(image, aligned, 2.5, side - 3.5, side - 5, 1) +
-           mean_level(image, aligned, 2.5, 3.5, 1, side - 7) + mean_level(image, aligned, side - 3.5, 3.5, 1, side - 7)) /
-          4;
-  out.contrast = white - black;
+  out.contrast = (white - black) * contrast_scale;
   if (out.contrast <= 0) return std::nullopt;
-  const auto level = [&](double g) { return (g - black) / out.contrast; };
+  const auto level = [&](double g) { return (g - black) / (white - black); };
   // A baseline square covers both strips of both axes: its brightest strip is dark.
   const auto baseline_likeness = [&](const CellLevels& l) {
     return 1 - level(std::max({l.low_x, l.high_x, l.low_y, l.high_y}));
@@ -1066,14 +1146,19 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   const auto read_id = [&](const cv::Matx33d& under) -> std::optional<PixelModel::Reading> {
     const PixelModel model(image, under, family, out.pixels_per_unit, smear);
     if (!model.valid()) return std::nullopt;
-    const TagId sampled = read_cells(image, under, family, out.pixels_per_unit, out.contrast).first;
-    return model.read(sampled, out.pixels_per_unit, out.contrast);
+    const TagId sampled = read_cells(image, under, family, out.pixels_per_unit, white - black).first;
+    return model.read(sampled, out.pixels_per_unit, white - black);
+  };
+  // Under a defocus found the contrast seen collapses, and a margin measured against it
+  // says little: the reading must also stand clear of the frame's noise.
+  const auto margin_of = [&](const PixelModel::Reading& r) {
+    return defocused && r.noise_margin < kMinNoiseMargin ? 0.0 : r.margin;
   };
   const auto reading = read_id(h);
   if (!reading) return std::nullopt;
   out.read = true;
   out.id = reading->id;
-  out.margin = reading->margin;
+  out.margin = margin_of(*reading);
   out.smear = reading->smear / out.pixels_per_unit;
 
   // The final homography: the whole marker of the id read, every square in place, aligned
@@ -1083,7 +1168,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   cv::Matx33d current = h;
   for (int attempt = 0; attempt < 3; ++attempt) {
     cv::Mat1f whole = marker_template(family, out.id);
-    if (sigma > 0.3) cv::GaussianBlur(whole, whole, cv::Size(), sigma);
+    if (sigma > 0.3) whole = blurred_template(whole, sigma, defocused);
     const cv::Matx33d start = from_frame * current * to_template.inv();
     cv::Mat refined(3, 3, CV_32F);
     for (int i = 0; i < 9; ++i) refined.at<float>(i / 3, i % 3) = float(start.val[i] / start.val[8]);
@@ -1105,12 +1190,12 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     const auto again = read_id(final_h);
     if (!again) return std::nullopt;
     if (again->id == out.id) {
-      out.margin = std::min(out.margin, again->margin);
+      out.margin = std::min(out.margin, margin_of(*again));
       out.smear = std::max(out.smear, again->smear / out.pixels_per_unit);
       return out;
     }
     out.id = again->id;
-    out.margin = again->margin;
+    out.margin = margin_of(*again);
     out.smear = again->smear / out.pixels_per_unit;
   }
   out.margin = 0;  // the reading never settled

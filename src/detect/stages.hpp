@@ -208,7 +208,8 @@ struct OutlineReading {
   cv::Matx33d homography;        // units -> frame pixels (as observed), in the marker's true turn
   double correlation = 0;        // of the marker's fixed structure with the image (ECC)
   double marker_correlation = 0; // of the whole marker read, aligned again (ECC)
-  double contrast = 0;           // the white ring's grey level minus the cells' cores'
+  double contrast = 0;           // the white ring's grey level minus the cells' cores' (under
+                                 // a defocus found: as the template's own blur shows them)
   double margin = 0;             // least, over the data cells, of how much worse the runner-up
                                  // square position fits than the best: mean squared grey
                                  // difference per sample over the contrast squared
