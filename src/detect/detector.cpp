@@ -235,6 +235,7 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
           verdict->correlation = reading->correlation, verdict->marker_correlation = reading->marker_correlation;
           verdict->contrast = reading->contrast, verdict->margin = reading->margin;
           verdict->pixels_per_unit = reading->pixels_per_unit, verdict->smear = reading->smear;
+          verdict->defocus = reading->defocus;
         }
       }
       if (stage != Stage::detected) continue;

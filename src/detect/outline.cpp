@@ -1029,15 +1029,16 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // below to the one the template's own blur would show, for the contrast check; the
   // margins stay measured against the contrast seen, as every other reading's are.
   double contrast_scale = 1;
+  double defocus = 0;  // units, beyond the template's own blur
   bool defocused = false;
   const auto try_defocus = [&](double to_beat) {
-    double best = to_beat, best_sigma = 0;
+    double best = to_beat, best_sigma = 0, best_units = 0;
     cv::Mat1f best_template;
     for (const double units : kDefocusUnits) {
       const double blur = std::hypot(sigma, units * kTemplateScale);
       const cv::Mat1f blurred = blurred_template(sharp_structure(family), blur, true);
       if (const double c = SparseTemplate(blurred, 3).correlation(crop, warp); c > best)
-        best = c, best_sigma = blur, best_template = blurred;
+        best = c, best_sigma = blur, best_units = units, best_template = blurred;
     }
     if (best_template.empty()) return false;
     cv::Mat again = warp.clone();
@@ -1046,7 +1047,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
           cv::findTransformECC(best_template, crop, again, cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
       if (c <= correlation) return true;  // the sharper alignment stands, and no smear beats it
       contrast_scale = structure_contrast(templ) / structure_contrast(best_template);
-      correlation = c, warp = again, templ = best_template, sigma = best_sigma, defocused = true;
+      correlation = c, warp = again, templ = best_template, sigma = best_sigma, defocus = best_units, defocused = true;
     } catch (const cv::Exception&) {
       // the sharper alignment stands
     }
@@ -1115,6 +1116,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   out.correlation = correlation;
   out.pixels_per_unit = smallest_scale(aligned, {side / 2.0, side / 2.0});
   out.contrast = (white - black) * contrast_scale;
+  out.defocus = defocus;
   if (out.contrast <= 0) return std::nullopt;
   const auto level = [&](double g) { return (g - black) / (white - black); };
   // A baseline square covers both strips of both axes: its brightest strip is dark.

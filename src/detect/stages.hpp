@@ -217,6 +217,7 @@ struct OutlineReading {
                                  // than the other two (0..1 of the contrast)
   double pixels_per_unit = 0;    // along the most foreshortened direction, at the centre
   double smear = 0;              // length of the motion blur found, units (0: none)
+  double defocus = 0;            // Gaussian blur found beyond the pixels', units (0: none)
 };
 
 // Aligns the fixed structure of `family` to the image from `outline` (its outer corners,

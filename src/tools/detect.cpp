@@ -61,7 +61,8 @@ nlohmann::json outline_json(const OutlineVerdict& v) {
                         {"contrast", v.contrast},
                         {"margin", v.margin},
                         {"pixels_per_unit", v.pixels_per_unit},
-                        {"smear", v.smear}};
+                        {"smear", v.smear},
+                        {"defocus", v.defocus}};
   if (v.reading) out["reading"] = id_json(*v.reading);
   return out;
 }

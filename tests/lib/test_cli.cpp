@@ -264,6 +264,7 @@ TEST(Cli, DetectWhyListsTheOutlineReads) {
     EXPECT_EQ(known.count(c["stage"].get<std::string>()), 1u) << c;
     EXPECT_EQ(c["outline"].size(), 4u);
     EXPECT_EQ(c["family"], "3x3");
+    EXPECT_GE(c["defocus"].get<double>(), 0) << c;
     if (c["stage"] != "detected") continue;
     ++detected;
     EXPECT_EQ(c["reading"], 6789);

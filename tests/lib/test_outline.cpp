@@ -233,9 +233,9 @@ Far defocused_marker(TagId id, double distance, double ink, double paper, std::m
 TEST(OutlineReading, ReadsDefocusedMarkersOfAboutAPixelPerUnit) {
   // Against the template blurred only by its pixels the structure correlates under 0.75
   // and the contrast looks a third of the ink's (none of the ten was read so); blurred by
-  // the defocus it aligns, and the cells read right. The defocus is not taken for a motion
-  // blur, and the outline found is the true one (the template blurred with paper beyond
-  // its ring; mirrored, the alignment shrank it by 0.7 px).
+  // the defocus it aligns, and the cells read right. The defocus is found and not taken
+  // for a motion blur, and the outline found is the true one (the template blurred with
+  // paper beyond its ring; mirrored, the alignment shrank it by 0.7 px).
   std::mt19937_64 rng(21);
   DetectorParams params;
   int read = 0;
@@ -248,6 +248,7 @@ TEST(OutlineReading, ReadsDefocusedMarkersOfAboutAPixelPerUnit) {
     ++read;
     EXPECT_EQ(reading->id, id) << "trial " << trial;
     EXPECT_EQ(reading->smear, 0) << "trial " << trial;
+    EXPECT_GE(reading->defocus, 1.1) << "trial " << trial;  // 1.45 px at 1.05 px per unit: 1.38 units
     const double side = Family(4).side();
     const std::array<cv::Point2d, 4> unit = {cv::Point2d(0, 0), {side, 0}, {side, side}, {0, side}};
     for (int i = 0; i < 4; ++i)

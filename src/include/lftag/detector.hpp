@@ -247,9 +247,11 @@ struct OutlineVerdict {
                                          // 0 when it did not align)
   double marker_correlation = 0;         // of the whole marker of the id read
   double contrast = 0;                   // white ring minus the cells' cores, grey levels
+                                         // (under a defocus: as the template's blur shows it)
   double margin = 0;                     // how much worse each cell's runner-up fits (least)
   double pixels_per_unit = 0;            // along the most foreshortened direction
   double smear = 0;                      // length of the motion blur found, units
+  double defocus = 0;                    // Gaussian defocus found, units (sigma)
 };
 
 // What the stages saw, for debug images (see draw.hpp) and for tuning: filled only on request.
