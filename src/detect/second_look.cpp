@@ -26,6 +26,7 @@ struct Cluster {
   int ink = 0;         // black pixels of its regions
   int pieces = 0;      // its black regions and their holes
   bool larger_marker = false;  // one of its regions is a larger family's marker
+  int region = 0;              // its first region
 };
 
 int find_root(std::vector<int>& parent, int i) {
@@ -112,6 +113,9 @@ int largest_hole(const RegionTree& tree, int r) {
 // or more (a bound of 25 lets some of them through again).
 constexpr int kMinSquarePixels = 16;
 
+// Ink on the grown hull of a region whose cluster outgrew a marker, at most: its own margin.
+constexpr double kCleanMargin = 0.02;
+
 bool is_larger_marker(const RegionTree& tree, int r, int max_n) {
   const int hole = largest_hole(tree, r);
   if (hole < 0) return false;
@@ -139,7 +143,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const Region& g = tree.regions[r];
     if (!g.black || g.area < 2) continue;
     if (g.x1 - g.x0 + 1 > look.max_size || g.y1 - g.y0 + 1 > look.max_size) continue;
-    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count, is_larger_marker(tree, r, look.max_n)});
+    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count, is_larger_marker(tree, r, look.max_n), r});
   }
   std::vector<int> parent(small.size());
   std::iota(parent.begin(), parent.end(), 0);
@@ -230,6 +234,34 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
       continue;
     const double ring = hull_ring_ink(tree, binary, r);
     if (ring <= 0.25) found.emplace_back(ring, box);
+  }
+  // A small marker whose border the threshold broke open (defocus and a steep tilt at
+  // about a pixel per unit) has no hole, and its cluster takes in the background's specks
+  // around the sheet until it outgrows a marker. So a black region of a small marker's
+  // size (under look.enlarge_below) in a larger cluster is also looked at with the pieces
+  // inside its box, when those look like a marker as a cluster does above (at least five
+  // pieces) and its own hull stands on a clean margin: the grown hull meets almost no ink.
+  // Larger markers keep their borders closed; resolved markers of other families in
+  // crowded frames are larger and would be read again for nothing.
+  for (std::size_t i = 0; i < small.size(); ++i) {
+    const Cluster& seed = small[i];
+    const int w = seed.x1 - seed.x0 + 1, h = seed.y1 - seed.y0 + 1;
+    if (!marker_sized(w, h) || std::max(w, h) >= look.enlarge_below || seed.larger_marker) continue;
+    const Cluster& whole = clusters[find_root(parent, int(i))];
+    if (whole.x0 == seed.x0 && whole.y0 == seed.y0 && whole.x1 == seed.x1 && whole.y1 == seed.y1) continue;
+    const cv::Rect box(seed.x0, seed.y0, w, h);
+    if (overlaps_any(box, taken) ||
+        std::any_of(found.begin(), found.end(), [&](const auto& f) { return (f.second & box).area() > 0; }))
+      continue;
+    // `small` is in the raster order of the regions' first pixels: their tops never decrease.
+    int ink = 0, pieces = 0;
+    auto k = std::lower_bound(small.begin(), small.end(), seed.y0, [](const Cluster& c, int y) { return c.y0 < y; });
+    for (; k != small.end() && k->y0 <= seed.y1; ++k)
+      if (k->x0 >= seed.x0 && k->x1 <= seed.x1 && k->y1 <= seed.y1) ink += k->ink, pieces += k->pieces;
+    const double fill = double(ink) / (w * h);
+    if (fill < 0.35 || fill > 0.8 || pieces < 5) continue;
+    const double ring = hull_ring_ink(tree, binary, seed.region);
+    if (ring <= kCleanMargin) found.emplace_back(ring, box);
   }
   // The most isolated first: a printed marker sits on its white margin.
   std::stable_sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.first < b.first; });

@@ -141,6 +141,48 @@ TEST(NearCandidates, ABorderWithItsSquaresSmearedIntoItIsLookedAt) {
   EXPECT_TRUE(clusters_of(one_side).empty());
 }
 
+TEST(NearCandidates, ASmallMarkerWhoseBorderBrokeOpenIsLookedAtAlone) {
+  // A 3x3 marker of 40 px turned 25 degrees whose border the threshold broke open on one
+  // side, two of its squares joined to the border, on a clean margin; but specks of the
+  // background reach into its box's corners and a chain of them joins its cluster, which
+  // outgrows a marker. The border with the pieces inside its box is looked at alone. At
+  // 60 px (a box of 80 px) a marker keeps its border closed: not looked at so; nor is one
+  // with ink on its margin.
+  const auto marker = [](double edge, bool ink_on_margin) {
+    const cv::Point2d centre(110, 110);
+    const auto at = [&](double u, double v) {  // marker units (0..24) -> pixels, turned 25 degrees
+      const double s = edge / 24, c = std::cos(25 * CV_PI / 180), n = std::sin(25 * CV_PI / 180);
+      return cv::Point(cvRound(centre.x + s * (c * (u - 12) - n * (v - 12))),
+                       cvRound(centre.y + s * (n * (u - 12) + c * (v - 12))));
+    };
+    const auto fill = [&](cv::Mat1b& image, double u0, double v0, double u1, double v1, std::uint8_t value) {
+      const std::vector<cv::Point> q = {at(u0, v0), at(u1, v0), at(u1, v1), at(u0, v1)};
+      cv::fillConvexPoly(image, q, value);
+    };
+    cv::Mat1b black(220, 220, std::uint8_t(0));
+    fill(black, 0, 0, 24, 24, 255);
+    fill(black, 2, 2, 22, 22, 0);
+    fill(black, 22, 8, 24, 16, 0);  // the border broken open
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) fill(black, 5 + 6 * c, 5 + 6 * r, 9 + 6 * c, 9 + 6 * r, 255);
+    fill(black, 1, 5, 6, 9, 255), fill(black, 17, 1, 21, 6, 255);  // two squares joined to the border
+    // Specks in the box's top-left corner, and a chain of them running off to the corner
+    // of the frame (touching diagonally: apart, but their boxes meet).
+    const cv::Rect box = cv::boundingRect(black);
+    for (int k = 0; k < 20; ++k) black(cv::Rect(box.x - 2 * k, box.y - 2 * k, 2, 2)).setTo(255);
+    if (ink_on_margin) cv::circle(black, at(12, 12), int(edge * 0.85), 255, 1);
+    return black;
+  };
+  const cv::Mat1b small = marker(40, false);
+  const std::vector<cv::Rect> boxes = clusters_of(small);
+  ASSERT_EQ(boxes.size(), 1u);
+  EXPECT_NEAR(boxes[0].x + boxes[0].width / 2.0, 110, 3);
+  EXPECT_NEAR(boxes[0].y + boxes[0].height / 2.0, 110, 3);
+  EXPECT_NEAR(boxes[0].width, 53, 3);  // 40 (cos 25 + sin 25)
+  EXPECT_TRUE(clusters_of(marker(60, false)).empty());
+  EXPECT_TRUE(clusters_of(marker(40, true)).empty());
+}
+
 TEST(NearCandidates, ResolvedMarkersOfLargerFamiliesAreNot) {
   // A 4x4 and a 5x5 marker that the binary image resolved, every square apart: sought
   // with families up to 3x3, no second look can make either a 3x3 (blur only joins
