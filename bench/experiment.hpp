@@ -19,7 +19,7 @@ struct Options {
   std::filesystem::path data;           // opencv-doc's examples/data
   int threads = 1;                      // worker threads (never used for timing)
   std::uint64_t seed = 1;
-  std::filesystem::path save_misses;   // when set, the video frames where a system missed a marker
+  std::filesystem::path save_misses;   // when set: the video and range frames where a system missed a marker
 };
 
 // An experiment writes its CSV files into options.out and returns false when a check it

@@ -47,7 +47,7 @@ int run(int argc, char** argv) {
       ->check(CLI::Range(1, 64));
   app.add_option("--seed", options.seed, "Seed of every random choice (default 1)");
   app.add_option("--save-misses", save_misses,
-                 "Write each video frame where a system missed a marker to this directory (PNG)");
+                 "Write each video or range frame where a system missed a marker to this directory (PNG)");
   app.add_flag("--list", list, "List experiments and systems, then exit");
   CLI11_PARSE(app, argc, argv);
 

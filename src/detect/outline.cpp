@@ -13,7 +13,6 @@
 // levels best. Every check is measured against the marker's own levels and units, so it
 // means the same at every size and under every blur.
 #include <algorithm>
-#include <cstdlib>
 #include <cmath>
 #include <limits>
 
@@ -257,8 +256,22 @@ BlurredStructure blurred_structure(const Family& family, double per_unit) {
   return *cached;
 }
 
-// The contrast that a template of the structure shows where the reading measures it: the
-// middle of the white ring minus the cells' cores (1 when sharp, less when blurred).
+// Where a reading takes its white and black: the middle of the white ring (its four
+// sides, each one unit wide) and each cell's 2 x 2 unit core, where its square always is.
+// `mean(x, y, w, h)` averages a unit rectangle.
+template <class Mean>
+double ring_level(const Mean& mean, double side) {
+  return (mean(2.5, 2.5, side - 5, 1) + mean(2.5, side - 3.5, side - 5, 1) + mean(2.5, 3.5, 1, side - 7) +
+          mean(side - 3.5, 3.5, 1, side - 7)) /
+         4;
+}
+template <class Mean>
+double core_level(const Mean& mean, int r, int c) {
+  return mean(5 + 6 * c, 5 + 6 * r, 2, 2);
+}
+
+// The contrast that a template of the structure shows where the reading measures it (1
+// when sharp, less when blurred).
 double structure_contrast(const cv::Mat1f& templ) {
   const auto mean = [&](double x, double y, double w, double h) {  // units, to the nearest template pixel
     const auto px = [](double u) { return int(std::lround(u * kTemplateScale)); };
@@ -268,11 +281,8 @@ double structure_contrast(const cv::Mat1f& templ) {
   const int n = int(side) / 6 - 1;
   double black = 0;
   for (int r = 0; r < n; ++r)
-    for (int c = 0; c < n; ++c) black += mean(5 + 6 * c, 5 + 6 * r, 2, 2);
-  black /= n * n;
-  const double white = (mean(2.5, 2.5, side - 5, 1) + mean(2.5, side - 3.5, side - 5, 1) + mean(2.5, 3.5, 1, side - 7) +
-                        mean(side - 3.5, 3.5, 1, side - 7)) / 4;
-  return white - black;
+    for (int c = 0; c < n; ++c) black += core_level(mean, r, c);
+  return ring_level(mean, side) - black / (n * n);
 }
 
 // Units -> template pixels (pixel centres at whole numbers).
@@ -312,7 +322,7 @@ CellLevels cell_levels(const ImageView& image, const cv::Matx33d& h, int r, int 
   const double x = 4 + 6 * c, y = 4 + 6 * r;
   return {mean_level(image, h, x, y + 1, 1, 2), mean_level(image, h, x + 3, y + 1, 1, 2),
           mean_level(image, h, x + 1, y, 2, 1), mean_level(image, h, x + 1, y + 3, 2, 1),
-          mean_level(image, h, x + 1, y + 1, 2, 2)};
+          core_level([&](double u, double v, double w, double hh) { return mean_level(image, h, u, v, w, hh); }, r, c)};
 }
 
 // A data cell's grey levels on a regular grid of unit points over every position its
@@ -1029,8 +1039,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // below to the one the template's own blur would show, for the contrast check; the
   // margins stay measured against the contrast seen, as every other reading's are.
   double contrast_scale = 1;
-  double defocus = 0;  // units, beyond the template's own blur
-  bool defocused = false;
+  double defocus = 0;  // units, beyond the template's own blur (0: none found)
   const auto try_defocus = [&](double to_beat) {
     double best = to_beat, best_sigma = 0, best_units = 0;
     cv::Mat1f best_template;
@@ -1047,7 +1056,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
           cv::findTransformECC(best_template, crop, again, cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
       if (c <= correlation) return true;  // the sharper alignment stands, and no smear beats it
       contrast_scale = structure_contrast(templ) / structure_contrast(best_template);
-      correlation = c, warp = again, templ = best_template, sigma = best_sigma, defocus = best_units, defocused = true;
+      correlation = c, warp = again, templ = best_template, sigma = best_sigma, defocus = best_units;
     } catch (const cv::Exception&) {
       // the sharper alignment stands
     }
@@ -1101,16 +1110,17 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     for (int r = 0; r < family.n(); ++r)
       for (int c = 0; c < family.n(); ++c) black += (levels[r][c] = cell_levels(image, aligned, r, c)).core;
     black /= family.cell_count();
-    white = (mean_level(image, aligned, 2.5, 2.5, side - 5, 1) + mean_level(image, aligned, 2.5, side - 3.5, side - 5, 1) +
-             mean_level(image, aligned, 2.5, 3.5, 1, side - 7) + mean_level(image, aligned, side - 3.5, 3.5, 1, side - 7)) /
-            4;
+    white = ring_level([&](double x, double y, double w, double h) { return mean_level(image, aligned, x, y, w, h); },
+                       side);
     return true;
   };
   if (!measure()) return std::nullopt;
   // A structure that aligned well but shows little contrast may be a defocused marker too.
-  if (correlation >= kMinCorrelation && white - black < kMinContrast && white > black && !defocused &&
-      smear_crop == cv::Point2d() && try_defocus(sparse.correlation(crop, warp)) && defocused && !measure())
-    return std::nullopt;
+  if (correlation >= kMinCorrelation && white > black && white - black < kMinContrast && defocus == 0 &&
+      smear_crop == cv::Point2d()) {
+    try_defocus(sparse.correlation(crop, warp));
+    if (defocus > 0 && !measure()) return std::nullopt;
+  }
 
   OutlineReading out;
   out.correlation = correlation;
@@ -1154,7 +1164,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // Under a defocus found the contrast seen collapses, and a margin measured against it
   // says little: the reading must also stand clear of the frame's noise.
   const auto margin_of = [&](const PixelModel::Reading& r) {
-    return defocused && r.noise_margin < kMinNoiseMargin ? 0.0 : r.margin;
+    return defocus > 0 && r.noise_margin < kMinNoiseMargin ? 0.0 : r.margin;
   };
   const auto reading = read_id(h);
   if (!reading) return std::nullopt;
@@ -1170,7 +1180,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   cv::Matx33d current = h;
   for (int attempt = 0; attempt < 3; ++attempt) {
     cv::Mat1f whole = marker_template(family, out.id);
-    if (sigma > 0.3) whole = blurred_template(whole, sigma, defocused);
+    if (sigma > 0.3) whole = blurred_template(whole, sigma, defocus > 0);
     const cv::Matx33d start = from_frame * current * to_template.inv();
     cv::Mat refined(3, 3, CV_32F);
     for (int i = 0; i < 9; ++i) refined.at<float>(i / 3, i % 3) = float(start.val[i] / start.val[8]);

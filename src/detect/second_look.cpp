@@ -179,6 +179,12 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
   const auto marker_sized = [&](int w, int h) {
     return std::max(w, h) >= look.min_size && std::max(w, h) <= look.max_size && std::max(w, h) <= 3 * std::min(w, h);
   };
+  // About half ink (0.42 to 0.68 measured from 13 px to blurred 70 px markers) and broken
+  // into pieces or holed by its gaps: one piece or a ring is a blob or a letter.
+  const auto marker_like = [](int ink, int pieces, int w, int h, int min_pieces) {
+    const double fill = double(ink) / (w * h);
+    return fill >= 0.35 && fill <= 0.8 && pieces >= min_pieces;
+  };
   const auto overlaps_any = [](const cv::Rect& box, const std::vector<cv::Rect>& boxes) {
     return std::any_of(boxes.begin(), boxes.end(), [&](const cv::Rect& t) { return (t & box).area() > 0; });
   };
@@ -186,13 +192,10 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     if (find_root(parent, int(i)) != int(i)) continue;
     const Cluster& c = clusters[i];
     const int w = c.x1 - c.x0 + 1, h = c.y1 - c.y0 + 1;
-    // A marker's size, about half ink (0.42 to 0.68 measured from 13 px to blurred 70 px
-    // markers), broken into pieces or holed by its gaps (at least 5 measured; one piece
-    // or a ring is a blob or a letter), and alone on its white margin. Of the clusters in
-    // photos, about 2 in 1,000 pass.
+    // A marker's size, like a marker in ink and pieces (at least 5 measured), and alone
+    // on its white margin. Of the clusters in photos, about 2 in 1,000 pass.
     if (!marker_sized(w, h)) continue;
-    const double fill = double(c.ink) / (w * h);
-    if (fill < 0.35 || fill > 0.8 || c.pieces < 4 || c.larger_marker) continue;
+    if (!marker_like(c.ink, c.pieces, w, h, 4) || c.larger_marker) continue;
     const double ring = ring_ink(binary, c);
     if (ring > 0.25) continue;
     const cv::Rect box(c.x0, c.y0, w, h);
@@ -258,8 +261,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     auto k = std::lower_bound(small.begin(), small.end(), seed.y0, [](const Cluster& c, int y) { return c.y0 < y; });
     for (; k != small.end() && k->y0 <= seed.y1; ++k)
       if (k->x0 >= seed.x0 && k->x1 <= seed.x1 && k->y1 <= seed.y1) ink += k->ink, pieces += k->pieces;
-    const double fill = double(ink) / (w * h);
-    if (fill < 0.35 || fill > 0.8 || pieces < 5) continue;
+    if (!marker_like(ink, pieces, w, h, 5)) continue;
     const double ring = hull_ring_ink(tree, binary, seed.region);
     if (ring <= kCleanMargin) found.emplace_back(ring, box);
   }
