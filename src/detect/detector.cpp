@@ -390,7 +390,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
     std::vector<cv::Rect> taken;
     for (const Detection& d : found)
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
-    std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, look, taken);
+    std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, work, look, taken);
     int outline_reads_left = detail::kMaxOutlineReads;
     if (int(boxes.size()) > p.max_second_looks) {
       stats.second_looks_skipped += std::int64_t(boxes.size()) - p.max_second_looks;

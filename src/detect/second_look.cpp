@@ -11,6 +11,7 @@
 // clusters are enlarged, binarised at the midpoint of their own dark and bright levels
 // and handed to the usual stages, with every measurement taken back to the frame.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 
@@ -130,10 +131,88 @@ bool is_larger_marker(const RegionTree& tree, int r, int max_n) {
   return smallest >= kMinSquarePixels && 3 * smallest >= largest;
 }
 
+// How well a cluster's binary image accounts for its grey levels, within the convex hull
+// of its regions. An edge is a pixel and its right or lower neighbour of the other colour.
+struct BinaryFit {
+  // Mid-grey pixels (more than a quarter of the way from the hull's darkest levels to its
+  // brightest and back, a fiftieth of the pixels left out at each end for noise) per
+  // edge. A sharp resolved marker has its few mid-grey pixels on its edges; blur widens
+  // the edges, and gaps the threshold closed are mid grey away from any edge.
+  double mid_grey_per_edge = 0;
+  // Twice the hull's pixels over its edges: the width of the stripes that would have as
+  // many edges (px).
+  double feature_width = 0;
+};
+
+BinaryFit binary_fit(const RegionTree& tree, const BinaryImage& binary, const ImageView& grey,
+                     const std::vector<int>& regions, const cv::Rect& box) {
+  std::vector<cv::Point> ends;
+  for (const int r : regions)
+    tree.for_each_run(r, [&](int y, int x0, int x1) {
+      ends.emplace_back(x0 - box.x, y - box.y), ends.emplace_back(x1 - 1 - box.x, y - box.y);
+    });
+  std::vector<cv::Point> hull;
+  cv::convexHull(ends, hull);
+  cv::Mat1b inside(box.size(), std::uint8_t(0));
+  cv::fillConvexPoly(inside, hull, 255);
+  // The hull's span on each row, in frame pixels: [first, last], empty when last < first.
+  std::vector<std::pair<int, int>> spans(box.height, {0, -1});
+  for (int y = 0; y < box.height; ++y) {
+    const std::uint8_t* m = inside.ptr<std::uint8_t>(y);
+    int first = 0, last = box.width - 1;
+    while (first < box.width && !m[first]) ++first;
+    while (last >= first && !m[last]) --last;
+    spans[y] = {box.x + first, box.x + last};
+  }
+  std::array<int, 256> histogram{};
+  int pixels = 0;
+  for (int y = 0; y < box.height; ++y) {
+    const std::uint8_t* g = grey.data + (box.y + y) * grey.stride;
+    for (int x = spans[y].first; x <= spans[y].second; ++x) ++histogram[g[x]];
+    pixels += std::max(0, spans[y].second - spans[y].first + 1);
+  }
+  const int tail = pixels / 50;
+  int dark = 0, bright = 255;
+  for (int sum = 0; dark < 255 && sum + histogram[dark] <= tail; ++dark) sum += histogram[dark];
+  for (int sum = 0; bright > 0 && sum + histogram[bright] <= tail; --bright) sum += histogram[bright];
+  const double lo = dark + 0.25 * (bright - dark), hi = bright - 0.25 * (bright - dark);
+  int mid = 0, edges = 0;
+  for (int y = 0; y < box.height; ++y) {
+    const int fy = box.y + y;
+    const auto [first, last] = spans[y];
+    const std::uint8_t* g = grey.data + fy * grey.stride;
+    for (int x = first; x <= last; ++x) mid += g[x] > lo && g[x] < hi;
+    // Edges 64 pixels at a time: the row against itself moved by one pixel, and against
+    // the row below.
+    for (int x = first; x <= last; x += 64) {
+      const int n = std::min(64, last - x + 1);
+      const std::uint64_t span = n == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << n) - 1;
+      const std::uint64_t here = binary.bits_at(x, fy);
+      if (x + 1 < binary.width) {
+        const int pairs = std::min(n, binary.width - 1 - x);  // with a right neighbour in the frame
+        const std::uint64_t within = pairs == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << pairs) - 1;
+        edges += __builtin_popcountll((here ^ binary.bits_at(x + 1, fy)) & within);
+      }
+      if (fy + 1 < binary.height) edges += __builtin_popcountll((here ^ binary.bits_at(x, fy + 1)) & span);
+    }
+  }
+  return {double(mid) / std::max(1, edges), 2.0 * pixels / std::max(1, edges)};
+}
+
+// A cluster whose binary image fits its grey levels this well is resolved (see
+// near_candidates). Measured on the AprilTag, ArUco and LFTag 2x2 markers of the speed
+// scenes: 0.23 to 0.51 mid-grey pixels per edge, features 12 px wide or more. On every
+// marker of 64 px or more that a second look found in the range, angle, blur, pose and
+// video sweeps: 0.83 or more, but for sharp 5x5 to 8x8 markers tilted 60 to 70 degrees
+// (0.37 to 0.47), whose features along the tilt are a pixel or two wide (5.1 px or less
+// on average) and which the frame's 16 px mean threshold did not resolve.
+constexpr double kResolvedMidGreyPerEdge = 0.6;
+constexpr double kResolvedFeatureWidth = 8;  // px
+
 }  // namespace
 
-std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const SecondLook& look,
-                                      const std::vector<cv::Rect>& taken) {
+std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& grey,
+                                      const SecondLook& look, const std::vector<cv::Rect>& taken) {
   // Small black regions, clustered when their boxes touch or overlap (a far marker's
   // border breaks into pieces on the diagonals). Each starts as a cluster of its own. The
   // tree numbers regions in the raster order of their first pixels, so their tops never
@@ -185,6 +264,15 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const double fill = double(ink) / (w * h);
     return fill >= 0.35 && fill <= 0.8 && pieces >= min_pieces;
   };
+  // A cluster of 64 px or more is looked at again in the frame's own pixels: when its
+  // binary image already explains its grey levels and its features are several pixels
+  // wide, it is resolved (a marker of another kind, or none), and a second look would see
+  // it the same way. Frames crowded with other markers spent most of their time on those.
+  const auto resolved = [&](const cv::Rect& box, const auto& regions) {
+    if (std::max(box.width, box.height) < look.enlarge_below) return false;
+    const BinaryFit fit = binary_fit(tree, binary, grey, regions(), box);
+    return fit.mid_grey_per_edge < kResolvedMidGreyPerEdge && fit.feature_width >= kResolvedFeatureWidth;
+  };
   const auto overlaps_any = [](const cv::Rect& box, const std::vector<cv::Rect>& boxes) {
     return std::any_of(boxes.begin(), boxes.end(), [&](const cv::Rect& t) { return (t & box).area() > 0; });
   };
@@ -199,7 +287,13 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const double ring = ring_ink(binary, c);
     if (ring > 0.25) continue;
     const cv::Rect box(c.x0, c.y0, w, h);
-    if (!overlaps_any(box, taken)) found.emplace_back(ring, box);
+    const auto members = [&] {
+      std::vector<int> regions;
+      for (std::size_t k = 0; k < small.size(); ++k)
+        if (find_root(parent, int(k)) == int(i)) regions.push_back(small[k].region);
+      return regions;
+    };
+    if (!overlaps_any(box, taken) && !resolved(box, members)) found.emplace_back(ring, box);
   }
   // A marker's border closed around a white hole that holds some of its squares, the
   // others joined to the border: its cluster can take in the background's dark specks
@@ -236,7 +330,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
         std::any_of(found.begin(), found.end(), [&](const auto& f) { return (f.second & box).area() > 0; }))
       continue;
     const double ring = hull_ring_ink(tree, binary, r);
-    if (ring <= 0.25) found.emplace_back(ring, box);
+    if (ring <= 0.25 && !resolved(box, [r] { return std::vector<int>{r}; })) found.emplace_back(ring, box);
   }
   // A small marker whose border the threshold broke open (defocus and a steep tilt at
   // about a pixel per unit) has no hole, and its cluster takes in the background's specks

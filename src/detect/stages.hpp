@@ -46,6 +46,14 @@ struct BinaryImage {
   std::vector<std::uint64_t> bits;
   const std::uint64_t* row(int y) const { return bits.data() + std::size_t(y) * words_per_row; }
   bool black(int x, int y) const { return (row(y)[x >> 6] >> (x & 63)) & 1; }
+  // Pixels x to x + 63 of row y, one to a bit (0 beyond the row's end).
+  std::uint64_t bits_at(int x, int y) const {
+    const std::uint64_t* r = row(y);
+    const int word = x >> 6, shift = x & 63;
+    const std::uint64_t low = word < words_per_row ? r[word] >> shift : 0;
+    const std::uint64_t high = shift && word + 1 < words_per_row ? r[word + 1] << (64 - shift) : 0;
+    return low | high;
+  }
   cv::Mat1b to_mat() const;  // 255 black, 0 white (for debug images)
 };
 
@@ -175,10 +183,11 @@ struct SecondLook {
 
 // Boxes of small isolated clusters of black regions, part ink and part paper, that touch
 // none of the `taken` boxes: where a marker may be that the binary image did not resolve.
-// Resolved markers of families larger than `look.max_n` are not. The most isolated (the
-// whitest ring around the box) come first.
-std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const SecondLook& look,
-                                      const std::vector<cv::Rect>& taken);
+// Resolved markers of families larger than `look.max_n` are not, nor clusters of
+// `look.enlarge_below` px or more, with coarse features, whose binary image explains
+// their `grey` levels. The most isolated (the whitest ring around the box) come first.
+std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& grey,
+                                      const SecondLook& look, const std::vector<cv::Rect>& taken);
 
 // A neighbourhood of the frame, enlarged, with its local darkest and brightest levels.
 struct Patch {

@@ -13,12 +13,25 @@ using namespace lftag;
 
 namespace {
 
+// Ink 30 and paper 220 where `black` is non-zero and zero, blurred by a Gaussian of
+// `sigma` pixels (none: sharp).
+cv::Mat1b grey_of(const cv::Mat1b& black, double sigma) {
+  cv::Mat1b grey(black.size(), std::uint8_t(220));
+  grey.setTo(30, black);
+  if (sigma > 0) cv::GaussianBlur(grey, grey, cv::Size(), sigma, sigma, cv::BORDER_REPLICATE);
+  return grey;
+}
+
+// The near-candidates of a binary image, with the grey levels `grey`; by default those of
+// a blurred print of it, whose binary image does not explain them all (so that only the
+// binary image's shapes decide).
 std::vector<cv::Rect> clusters_of(const cv::Mat1b& black, const std::vector<cv::Rect>& taken = {},
-                                  const detail::SecondLook& look = {}) {
+                                  const detail::SecondLook& look = {}, cv::Mat1b grey = {}) {
+  if (grey.empty()) grey = grey_of(black, 2);
   const detail::BinaryImage binary = test::binary_from_mask(black);
   detail::RegionTree tree;
   detail::RegionLabeller().label(binary, tree);
-  return detail::near_candidates(tree, binary, look, taken);
+  return detail::near_candidates(tree, binary, ImageView(grey), look, taken);
 }
 
 // The binary image of a resolved `family` marker, `scale` pixels per unit, at (x, y) on
@@ -222,6 +235,49 @@ TEST(NearCandidates, ResolvedMarkersOfLargerFamiliesAreNot) {
   EXPECT_TRUE(clusters_of(small, {}, upto3).empty());
 }
 
+TEST(NearCandidates, SharpClustersOfAMarkersSizeAreNotLookedAtAgain) {
+  // Another kind of marker, sharp and 96 px: a border around a hole with data blobs of
+  // several shapes. Its binary image explains its grey levels (the mid grey is on its
+  // edges), so a second look at the same resolution would see the same: not looked at.
+  // Blurred by 2 px, it is; and so is a sharp one of 48 px, which a second look enlarges.
+  const auto pattern = [](int cell_w, int cell_h) {  // 8 x 8 cells of cell_w x cell_h px, at (40, 40)
+    cv::Mat1b black(80 + 8 * cell_h, 80 + 8 * cell_w, std::uint8_t(0));
+    const auto ink = [&](int c, int r, int w, int h) {
+      black(cv::Rect(40 + c * cell_w, 40 + r * cell_h, w * cell_w, h * cell_h)).setTo(255);
+    };
+    ink(0, 0, 8, 1), ink(0, 7, 8, 1), ink(0, 1, 1, 6), ink(7, 1, 1, 6);  // the border
+    ink(2, 2, 1, 1), ink(4, 2, 2, 1), ink(2, 4, 2, 2), ink(5, 4, 1, 2);   // data blobs
+    return black;
+  };
+  const cv::Mat1b large = pattern(12, 12), small = pattern(6, 6);
+  cv::Mat1b noise(large.size());
+  cv::randn(noise, 0, 3);
+  cv::Mat1b sharp = grey_of(large, 0);
+  sharp += noise;
+  EXPECT_TRUE(clusters_of(large, {}, {}, sharp).empty());
+  const cv::Mat1b blurred = grey_of(large, 2);
+  const std::vector<cv::Rect> boxes = clusters_of(large, {}, {}, blurred);
+  ASSERT_EQ(boxes.size(), 1u);
+  EXPECT_EQ(boxes[0], cv::Rect(40, 40, 96, 96));
+  EXPECT_EQ(clusters_of(small, {}, {}, grey_of(small, 0)).size(), 1u);
+  // A sharp cluster whose features are a few pixels wide is looked at too: the frame's
+  // 16 px mean threshold can fail on it where the second look's own threshold does not
+  // (sharp 5x5 to 8x8 markers tilted 60 to 70 degrees were found so). Here pieces of
+  // 3 x 3 px touching at their corners, 72 x 24 px in all; the same with pieces of 12 px
+  // is not looked at.
+  const auto checkerboard = [](int piece, int columns, int rows) {
+    cv::Mat1b black(80 + rows * piece, 80 + columns * piece, std::uint8_t(0));
+    for (int r = 0; r < rows; ++r)
+      for (int c = 0; c < columns; ++c)
+        if ((r + c) % 2 == 0) black(cv::Rect(40 + c * piece, 40 + r * piece, piece, piece)).setTo(255);
+    return black;
+  };
+  const cv::Mat1b fine = checkerboard(3, 24, 8), coarse = checkerboard(12, 8, 8);
+  EXPECT_EQ(clusters_of(fine, {}, {}, grey_of(fine, 0)).size(), 1u);
+  EXPECT_EQ(clusters_of(coarse, {}, {}, grey_of(coarse, 2)).size(), 1u);
+  EXPECT_TRUE(clusters_of(coarse, {}, {}, grey_of(coarse, 0)).empty());
+}
+
 TEST(SecondLookPatch, ReopensOnePixelGapsBesideABrightMargin) {
   // A 3x3 marker at 0.55 pixels per unit (13 px across) with a quarter-tag white margin on
   // mid-grey, turned 30 degrees: the frame's 16 px mean threshold joins squares to the
@@ -252,7 +308,7 @@ TEST(SecondLookPatch, ReopensOnePixelGapsBesideABrightMargin) {
   labeller.label(binary, tree);
   EXPECT_LT(most_children(tree), 9) << "the frame's threshold keeps the marker: no test of the second look";
 
-  const std::vector<cv::Rect> boxes = detail::near_candidates(tree, binary, detail::SecondLook{}, {});
+  const std::vector<cv::Rect> boxes = detail::near_candidates(tree, binary, view, detail::SecondLook{}, {});
   ASSERT_EQ(boxes.size(), 1u);
   const cv::Rect truth = cv::boundingRect(std::vector<cv::Point2f>(scene.truth[0].corners.begin(), scene.truth[0].corners.end()));
   EXPECT_GE((boxes[0] & truth).area(), truth.area() / 2);
