@@ -49,15 +49,19 @@ double ring_ink(const BinaryImage& binary, const Cluster& b) {
   return count ? double(black) / count : 1.0;
 }
 
-// Black pixels on the outline of region r's convex hull moved out by a tenth of its size
-// (at least two pixels), over the outline's length: unlike its box's ring, this stays on
-// the white margin of a turned sheet.
-double hull_ring_ink(const RegionTree& tree, const BinaryImage& binary, int r) {
-  std::vector<cv::Point> ends;
-  tree.for_each_run(r, [&](int y, int x0, int x1) { ends.emplace_back(x0, y), ends.emplace_back(x1 - 1, y); });
-  std::vector<cv::Point> hull;
+// The convex hull of some regions' pixels (frame pixels): that of the ends of their runs.
+std::vector<cv::Point> region_hull(const RegionTree& tree, const std::vector<int>& regions) {
+  std::vector<cv::Point> ends, hull;
+  for (const int r : regions)
+    tree.for_each_run(r, [&](int y, int x0, int x1) { ends.emplace_back(x0, y), ends.emplace_back(x1 - 1, y); });
   cv::convexHull(ends, hull);
-  const Region& g = tree.regions[r];
+  return hull;
+}
+
+// Black pixels on the outline of region g's convex hull `hull` moved out by a tenth of its
+// size (at least two pixels), over the outline's length: unlike its box's ring, this stays
+// on the white margin of a turned sheet.
+double hull_ring_ink(const BinaryImage& binary, const Region& g, const std::vector<cv::Point>& hull) {
   const double size = std::max(g.x1 - g.x0, g.y1 - g.y0) + 1;
   const double grow = 1 + std::max(0.2, 4 / size);
   const cv::Point2d centre((g.x0 + g.x1) / 2.0, (g.y0 + g.y1) / 2.0);
@@ -132,7 +136,7 @@ bool is_larger_marker(const RegionTree& tree, int r, int max_n) {
 }
 
 // How well a cluster's binary image accounts for its grey levels, within the convex hull
-// of its regions. An edge is a pixel and its right or lower neighbour of the other colour.
+// of its regions (`hull`, frame pixels, within `box`). An edge is a pixel and its right or lower neighbour of the other colour.
 struct BinaryFit {
   // Mid-grey pixels (more than a quarter of the way from the hull's darkest levels to its
   // brightest and back, a fiftieth of the pixels left out at each end for noise) per
@@ -144,15 +148,9 @@ struct BinaryFit {
   double feature_width = 0;
 };
 
-BinaryFit binary_fit(const RegionTree& tree, const BinaryImage& binary, const ImageView& grey,
-                     const std::vector<int>& regions, const cv::Rect& box) {
-  std::vector<cv::Point> ends;
-  for (const int r : regions)
-    tree.for_each_run(r, [&](int y, int x0, int x1) {
-      ends.emplace_back(x0 - box.x, y - box.y), ends.emplace_back(x1 - 1 - box.x, y - box.y);
-    });
-  std::vector<cv::Point> hull;
-  cv::convexHull(ends, hull);
+BinaryFit binary_fit(const BinaryImage& binary, const ImageView& grey, std::vector<cv::Point> hull,
+                     const cv::Rect& box) {
+  for (cv::Point& p : hull) p -= box.tl();
   cv::Mat1b inside(box.size(), std::uint8_t(0));
   cv::fillConvexPoly(inside, hull, 255);
   // The hull's span on each row, in frame pixels: [first, last], empty when last < first.
@@ -177,11 +175,10 @@ BinaryFit binary_fit(const RegionTree& tree, const BinaryImage& binary, const Im
   for (int sum = 0; bright > 0 && sum + histogram[bright] <= tail; --bright) sum += histogram[bright];
   const double lo = dark + 0.25 * (bright - dark), hi = bright - 0.25 * (bright - dark);
   int mid = 0, edges = 0;
+  for (int v = 0; v < 256; ++v) mid += v > lo && v < hi ? histogram[v] : 0;
   for (int y = 0; y < box.height; ++y) {
     const int fy = box.y + y;
     const auto [first, last] = spans[y];
-    const std::uint8_t* g = grey.data + fy * grey.stride;
-    for (int x = first; x <= last; ++x) mid += g[x] > lo && g[x] < hi;
     // Edges 64 pixels at a time: the row against itself moved by one pixel, and against
     // the row below.
     for (int x = first; x <= last; x += 64) {
@@ -268,9 +265,9 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
   // binary image already explains its grey levels and its features are several pixels
   // wide, it is resolved (a marker of another kind, or none), and a second look would see
   // it the same way. Frames crowded with other markers spent most of their time on those.
-  const auto resolved = [&](const cv::Rect& box, const auto& regions) {
+  const auto resolved = [&](const cv::Rect& box, const auto& hull) {
     if (std::max(box.width, box.height) < look.enlarge_below) return false;
-    const BinaryFit fit = binary_fit(tree, binary, grey, regions(), box);
+    const BinaryFit fit = binary_fit(binary, grey, hull(), box);
     return fit.mid_grey_per_edge < kResolvedMidGreyPerEdge && fit.feature_width >= kResolvedFeatureWidth;
   };
   const auto overlaps_any = [](const cv::Rect& box, const std::vector<cv::Rect>& boxes) {
@@ -287,13 +284,13 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const double ring = ring_ink(binary, c);
     if (ring > 0.25) continue;
     const cv::Rect box(c.x0, c.y0, w, h);
-    const auto members = [&] {
-      std::vector<int> regions;
+    const auto hull = [&] {
+      std::vector<int> members;
       for (std::size_t k = 0; k < small.size(); ++k)
-        if (find_root(parent, int(k)) == int(i)) regions.push_back(small[k].region);
-      return regions;
+        if (find_root(parent, int(k)) == int(i)) members.push_back(small[k].region);
+      return region_hull(tree, members);
     };
-    if (!overlaps_any(box, taken) && !resolved(box, members)) found.emplace_back(ring, box);
+    if (!overlaps_any(box, taken) && !resolved(box, hull)) found.emplace_back(ring, box);
   }
   // A marker's border closed around a white hole that holds some of its squares, the
   // others joined to the border: its cluster can take in the background's dark specks
@@ -329,8 +326,9 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     if (overlaps_any(box, taken) ||
         std::any_of(found.begin(), found.end(), [&](const auto& f) { return (f.second & box).area() > 0; }))
       continue;
-    const double ring = hull_ring_ink(tree, binary, r);
-    if (ring <= 0.25 && !resolved(box, [r] { return std::vector<int>{r}; })) found.emplace_back(ring, box);
+    const std::vector<cv::Point> hull = region_hull(tree, {r});
+    const double ring = hull_ring_ink(binary, g, hull);
+    if (ring <= 0.25 && !resolved(box, [&] { return hull; })) found.emplace_back(ring, box);
   }
   // A small marker whose border the threshold broke open (defocus and a steep tilt at
   // about a pixel per unit) has no hole, and its cluster takes in the background's specks
@@ -356,7 +354,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     for (; k != small.end() && k->y0 <= seed.y1; ++k)
       if (k->x0 >= seed.x0 && k->x1 <= seed.x1 && k->y1 <= seed.y1) ink += k->ink, pieces += k->pieces;
     if (!marker_like(ink, pieces, w, h, 5)) continue;
-    const double ring = hull_ring_ink(tree, binary, seed.region);
+    const double ring = hull_ring_ink(binary, tree.regions[seed.region], region_hull(tree, {seed.region}));
     if (ring <= kCleanMargin) found.emplace_back(ring, box);
   }
   // The most isolated first: a printed marker sits on its white margin.
