@@ -143,6 +143,12 @@ def video_rows(results):
     return by_system
 
 
+def recall(text):
+    """A recall in percent with one decimal, or two where one would round a miss up to 100."""
+    value = float(text)
+    return f"{value:.2f} %" if value < 100 and round(value, 1) >= 100 else f"{value:.1f} %"
+
+
 def video_table(results):
     def number(text, digits):
         return f"{float(text):.{digits}f}" if text else "-"
@@ -151,7 +157,7 @@ def video_table(results):
     for system, bins in video_rows(results).items():
         r = bins.get(("all", "all"))
         if r:
-            rows.append([system, f"{int(r['markers']):,}", f"{int(r['found']):,}", f"{float(r['recall_pct']):.1f} %",
+            rows.append([system, f"{int(r['markers']):,}", f"{int(r['found']):,}", recall(r['recall_pct']),
                          r["wrong"], number(r["median_translation_pct"], 3), number(r["p90_translation_pct"], 3),
                          number(r["median_rotation_deg"], 3)])
     return table(["system", "markers", "found", "recall", "wrong", "translation error median (% of distance)",
@@ -165,7 +171,7 @@ def video_bins_table(results):
     unit = {"edge_px": "px", "tilt_deg": "deg"}
     rows = []
     for system, b in by_system.items():
-        rows.append([system] + [f"{float(b[k]['recall_pct']):.1f} %" if k in b and b[k]["recall_pct"] else "-"
+        rows.append([system] + [recall(b[k]['recall_pct']) if k in b and b[k]["recall_pct"] else "-"
                                 for k in bins])
     counts = next(iter(by_system.values()), {})
     header = [f"{name} {unit.get(kind, kind)} ({int(counts[(kind, name)]['markers']):,})" if (kind, name) in counts
