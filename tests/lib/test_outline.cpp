@@ -260,12 +260,13 @@ TEST(OutlineReading, ReadsDefocusedMarkersOfAboutAPixelPerUnit) {
 TEST(OutlineReading, ReadsDefocusedMarkersSeenObliquely) {
   // The same markers tilted by 60 degrees at 7.5 m: about 0.7 px per unit across the
   // tilt. Against the sharper template many align under 0.6, where no blur was sought
-  // before (2 of the 20 read so); the defocus is sought from 0.55, and those read are
-  // read right, every one under a defocus found.
+  // before (6 of the 60 read so); the defocus is sought from 0.55 (20 read; 19 in the
+  // sanitizer build, whose compiler rounds differently), and those read are read right,
+  // every one under a defocus found.
   std::mt19937_64 rng(23);
   DetectorParams params;
   int read = 0;
-  for (int trial = 0; trial < 20; ++trial) {
+  for (int trial = 0; trial < 60; ++trial) {
     const TagId id = random_id(Family(4), rng);
     const Far far = defocused_marker(id, 7.5, 0.05, 0.9, rng, 60);
     const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.5, rng), Family(4));
@@ -274,7 +275,7 @@ TEST(OutlineReading, ReadsDefocusedMarkersSeenObliquely) {
     EXPECT_EQ(reading->id, id) << "trial " << trial;
     EXPECT_GT(reading->defocus, 0) << "trial " << trial;
   }
-  EXPECT_GE(read, 8);
+  EXPECT_GE(read, 12);
 }
 
 TEST(OutlineReading, DimDefocusedMarkersAreNeverMisread) {
