@@ -971,10 +971,17 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // motion blur is allowed for: in the range, blur and video sweeps every reading accepted
   // there had started at 0.68 or more, while the outlines of other families' markers and
   // of AprilTags start at 0.64 or less. Those are spared the alignment, which is most of
-  // the cost of a frame that holds them.
-  if (start_per_unit >= kResolvedPixelsPerUnit && start_correlation < kMinResolvedStartCorrelation) {
+  // the cost of a frame that holds them. From 1.5 px per unit it shows less plainly: there
+  // every reading accepted in the range, blur, pose and video sweeps had started at 0.648
+  // or more, while a sharp 6x6 read as a 7x7 started at 0.41 to 0.43 and took three
+  // alignments, none converging (up to 28 ms).
+  const double min_start = start_per_unit >= kResolvedPixelsPerUnit ? kMinResolvedStartCorrelation
+                           : start_per_unit >= kSharpPixelsPerUnit  ? kMinSharpStartCorrelation
+                                                                    : 0.0;
+  if (start_correlation < min_start) {
     // The structure smeared in eight directions over the lengths sought after the
-    // alignment, blurred as at two to three pixels per unit: drawn once per thread.
+    // alignment, blurred as at two to three pixels per unit (the bounds above were
+    // measured with them): drawn once per thread.
     thread_local std::array<std::vector<SparseTemplate>, Family::kMaxN + 1> smeared_structures;
     std::vector<SparseTemplate>& smeared = smeared_structures[family.n()];
     if (smeared.empty()) {
@@ -988,9 +995,9 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     }
     const cv::Mat warp = warp_of(start);
     double best = start_correlation;
-    for (std::size_t i = 0; i < smeared.size() && best < kMinResolvedStartCorrelation; ++i)
+    for (std::size_t i = 0; i < smeared.size() && best < min_start; ++i)
       best = std::max(best, smeared[i].correlation(crop, warp));
-    if (best < kMinResolvedStartCorrelation) {
+    if (best < min_start) {
       OutlineReading out;
       out.correlation = best, out.pixels_per_unit = start_per_unit;
       return out;

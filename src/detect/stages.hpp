@@ -239,8 +239,10 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
 
 // The checks an outline reading must pass to be a detection, each scale-free.
 constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it
-// From kResolvedPixelsPerUnit, at the start too, with the best motion blur.
+// From kResolvedPixelsPerUnit, at the start too, with the best motion blur; from
+// kSharpPixelsPerUnit, kMinSharpStartCorrelation.
 constexpr double kMinResolvedStartCorrelation = 0.66, kResolvedPixelsPerUnit = 2;
+constexpr double kMinSharpStartCorrelation = 0.55, kSharpPixelsPerUnit = 1.5;
 // Aligned, below which no motion blur or defocus is sought. A 31 px 4x4 at 60 degrees of
 // tilt, defocused by 1.45 px, aligned at 0.58 to 0.60 before its defocus took it to 0.76.
 constexpr double kMinSmearedCorrelation = 0.55;
