@@ -524,13 +524,14 @@ TEST(OutlineReading, OtherMarkersAreRefusedBeforeTheAlignment) {
 TEST(OutlineReading, SmallerFamiliesAreRefusedBeforeTheAlignmentFromOneAndAHalfPixelsPerUnit) {
   // 6x6 LFTags at 4 m (80 px, 1.67 px per unit of a 7x7, as in the crowded speed scenes)
   // read as 7x7: their structure starts at about 0.4, under 0.55 even smeared, so no
-  // alignment is tried (in those scenes three, none converging, took up to 28 ms). 7x7
+  // alignment is tried (in those scenes three, none converging, took up to 28 ms; with
+  // the gate from 2 px per unit none of these reach it, their alignments failing). 7x7
   // markers at the same distance are still read.
   DetectorParams params;
   std::mt19937_64 rng(24);
   std::uniform_real_distribution<double> u(-1, 1);
   int at_the_gate = 0;
-  for (int trial = 0; trial < 10; ++trial) {
+  for (int trial = 0; trial < 30; ++trial) {
     const Far other = far_marker(6, random_id(Family(6), rng), 4.0, 180 * u(rng));
     const auto refused = read_outline(ImageView(other.scene.image), other.corners, Family(7));
     if (refused) {  // else refused even earlier, under kMinStartCorrelation
@@ -547,5 +548,7 @@ TEST(OutlineReading, SmallerFamiliesAreRefusedBeforeTheAlignmentFromOneAndAHalfP
     EXPECT_TRUE(acceptable(*reading, params)) << "trial " << trial;
     EXPECT_EQ(reading->id, id) << "trial " << trial;
   }
-  EXPECT_GE(at_the_gate, 6);  // 8 of the 10 (measured)
+  // Their starts lie about 0.4, where the first gate refuses some of them: 13 of the 30
+  // reach this one (16 in the sanitizer build, whose compiler rounds differently).
+  EXPECT_GE(at_the_gate, 8);
 }
