@@ -385,8 +385,8 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   if (p.second_look) {
     start = Clock::now();
     detail::SecondLook look;
-    look.max_n = 0;
-    for (const Family& f : p.families) look.max_n = std::max(look.max_n, f.n());
+    look.sought.reset();
+    for (const Family& f : p.families) look.sought.set(f.n());
     std::vector<cv::Rect> taken;
     for (const Detection& d : found)
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));

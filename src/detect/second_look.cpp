@@ -26,8 +26,10 @@ struct Cluster {
   int x0, y0, x1, y1;  // inclusive box
   int ink = 0;         // black pixels of its regions
   int pieces = 0;      // its black regions and their holes
-  bool larger_marker = false;  // one of its regions is a larger family's marker
-  int region = 0;              // its first region
+  // One of its regions is a resolved marker of a family not sought (see unsought_marker):
+  bool larger_marker = false;   // larger than every one sought
+  bool smaller_marker = false;  // smaller than one
+  int region = 0;               // its first region
 };
 
 int find_root(std::vector<int>& parent, int i) {
@@ -107,32 +109,43 @@ int largest_hole(const RegionTree& tree, int r) {
   return hole;
 }
 
-// Whether black region r is a marker of a family larger than every one sought, resolved:
-// its largest hole holds exactly m x m squares, m > max_n, of about one size (within the
-// spread of a steep perspective) and each of kMinSquarePixels or more. Blur only joins a
-// resolved marker's squares, so no second look makes that an n x n marker, n <= max_n.
+// The n of the family not sought whose resolved marker black region r is, or 0: its
+// largest hole holds exactly n x n squares, each of kMinSquarePixels or more and of about
+// one size.
+// - Larger than every family sought: blur only joins a resolved marker's squares, so no
+//   second look makes it a marker of a family sought, and it is not looked at. Its
+//   squares are within 3 times of each other (the spread of a steep perspective).
+// - Smaller than one: the squares of a larger marker joined in pairs and threes could
+//   number n x n too. Two joined data squares are at least 22 units to a single one's 9,
+//   so the squares must be within kMaxSmallerMarkerSpread; and such a marker is only
+//   taken for what it shows when its binary image explains its grey levels (a blur that
+//   joins squares leaves mid grey between them; see near_candidates).
 // Small markers are another matter: in the range sweep a 3x3 marker of 31 px (1.3 px per
 // unit) showed 16 pieces of 2 to 15 pixels in its hole, its squares broken by the mean
 // threshold; and a large square hollowed by it breaks into pieces of unequal sizes. The
 // other families' markers of the speed scenes (70 px and more) have squares of 16 pixels
 // or more (a bound of 25 lets some of them through again).
 constexpr int kMinSquarePixels = 16;
+// The resolved LFTag markers of the speed scenes, 2x2 to 8x8: largest squares (the
+// baselines, 16/9 of the others) 1.64 to 2.11 times their smallest.
+constexpr double kMaxSmallerMarkerSpread = 2.3;
 
 // Ink on the grown hull of a region whose cluster outgrew a marker, at most: its own margin.
 constexpr double kCleanMargin = 0.02;
 
-bool is_larger_marker(const RegionTree& tree, int r, int max_n) {
+int unsought_marker(const RegionTree& tree, int r, const SecondLook& look) {
   const int hole = largest_hole(tree, r);
-  if (hole < 0) return false;
+  if (hole < 0) return 0;
   const Region& white = tree.regions[hole];
-  const int m = int(std::lround(std::sqrt(double(white.child_count))));
-  if (m <= max_n || m > Family::kMaxN || m * m != white.child_count) return false;
+  const int n = int(std::lround(std::sqrt(double(white.child_count))));
+  if (n < 2 || n > Family::kMaxN || n * n != white.child_count || look.sought[n]) return 0;
   int smallest = white.area, largest = 0;
   for (int i = 0; i < white.child_count; ++i) {
     const int area = tree.regions[tree.children_of(hole)[i]].area;
     smallest = std::min(smallest, area), largest = std::max(largest, area);
   }
-  return smallest >= kMinSquarePixels && 3 * smallest >= largest;
+  const double spread = n > look.max_n() ? 3 : kMaxSmallerMarkerSpread;
+  return smallest >= kMinSquarePixels && largest <= spread * smallest ? n : 0;
 }
 
 // How well a cluster's binary image accounts for its grey levels, within the convex hull
@@ -219,7 +232,9 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const Region& g = tree.regions[r];
     if (!g.black || g.area < 2) continue;
     if (g.x1 - g.x0 + 1 > look.max_size || g.y1 - g.y0 + 1 > look.max_size) continue;
-    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count, is_larger_marker(tree, r, look.max_n), r});
+    const int unsought = unsought_marker(tree, r, look);
+    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count, unsought > look.max_n(),
+                     unsought != 0 && unsought < look.max_n(), r});
   }
   std::vector<int> parent(small.size());
   std::iota(parent.begin(), parent.end(), 0);
@@ -248,6 +263,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     c.ink += g.ink;
     c.pieces += g.pieces;
     c.larger_marker = c.larger_marker || g.larger_marker;
+    c.smaller_marker = c.smaller_marker || g.smaller_marker;
   }
 
   std::vector<std::pair<double, cv::Rect>> found;  // ring ink, box
@@ -263,12 +279,14 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
   };
   // A cluster of 64 px or more is looked at again in the frame's own pixels: when its
   // binary image already explains its grey levels and its features are several pixels
-  // wide, it is resolved (a marker of another kind, or none), and a second look would see
-  // it the same way. Frames crowded with other markers spent most of their time on those.
-  const auto resolved = [&](const cv::Rect& box, const auto& hull) {
+  // wide, or it shows the squares of a smaller family's marker not sought, it is resolved
+  // (a marker of another kind, or none), and a second look would see it the same way.
+  // Frames crowded with other markers spent most of their time on those.
+  const auto resolved = [&](const cv::Rect& box, const auto& hull, bool smaller_marker) {
     if (std::max(box.width, box.height) < look.enlarge_below) return false;
     const BinaryFit fit = binary_fit(binary, grey, hull(), box);
-    return fit.mid_grey_per_edge < kResolvedMidGreyPerEdge && fit.feature_width >= kResolvedFeatureWidth;
+    return fit.mid_grey_per_edge < kResolvedMidGreyPerEdge &&
+           (fit.feature_width >= kResolvedFeatureWidth || smaller_marker);
   };
   const auto overlaps_any = [](const cv::Rect& box, const std::vector<cv::Rect>& boxes) {
     return std::any_of(boxes.begin(), boxes.end(), [&](const cv::Rect& t) { return (t & box).area() > 0; });
@@ -290,7 +308,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
         if (find_root(parent, int(k)) == int(i)) members.push_back(small[k].region);
       return region_hull(tree, members);
     };
-    if (!overlaps_any(box, taken) && !resolved(box, hull)) found.emplace_back(ring, box);
+    if (!overlaps_any(box, taken) && !resolved(box, hull, c.smaller_marker)) found.emplace_back(ring, box);
   }
   // A marker's border closed around a white hole that holds some of its squares, the
   // others joined to the border: its cluster can take in the background's dark specks
@@ -301,7 +319,8 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     if (!g.black || g.child_count == 0) continue;
     const int w = g.x1 - g.x0 + 1, h = g.y1 - g.y0 + 1;
     if (!marker_sized(w, h)) continue;
-    if (is_larger_marker(tree, r, look.max_n)) continue;
+    const int unsought = unsought_marker(tree, r, look);
+    if (unsought > look.max_n()) continue;
     // Its largest hole with what the hole holds: the marker inside its border.
     const int hole = largest_hole(tree, r);
     const Region& white = tree.regions[hole];
@@ -328,7 +347,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
       continue;
     const std::vector<cv::Point> hull = region_hull(tree, {r});
     const double ring = hull_ring_ink(binary, g, hull);
-    if (ring <= 0.25 && !resolved(box, [&] { return hull; })) found.emplace_back(ring, box);
+    if (ring <= 0.25 && !resolved(box, [&] { return hull; }, unsought != 0)) found.emplace_back(ring, box);
   }
   // A small marker whose border the threshold broke open (defocus and a steep tilt at
   // about a pixel per unit) has no hole, and its cluster takes in the background's specks

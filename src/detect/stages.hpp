@@ -28,6 +28,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bitset>
 #include <chrono>
 #include <cstdint>
 #include <optional>
@@ -178,14 +179,22 @@ struct SecondLook {
   int min_size = 6;   // frame pixels, the cluster's longer side
   int max_size = 192;
   int enlarge_below = 64;  // clusters smaller than this are enlarged twice
-  int max_n = Family::kMaxN;  // the largest n of the families sought
+  // The n x n families sought (bit n): the largest decides which resolved markers are
+  // not looked at (see near_candidates).
+  std::bitset<Family::kMaxN + 1> sought = std::bitset<Family::kMaxN + 1>().set().reset(0).reset(1);
+  int max_n() const {
+    int n = Family::kMaxN;
+    while (n > 0 && !sought[n]) --n;
+    return n;
+  }
 };
 
 // Boxes of small isolated clusters of black regions, part ink and part paper, that touch
 // none of the `taken` boxes: where a marker may be that the binary image did not resolve.
-// Resolved markers of families larger than `look.max_n` are not, nor clusters of
-// `look.enlarge_below` px or more, with coarse features, whose binary image explains
-// their `grey` levels. The most isolated (the whitest ring around the box) come first.
+// Resolved markers of families larger than every one sought are not, nor clusters of
+// `look.enlarge_below` px or more whose binary image explains their `grey` levels and
+// shows coarse features or a smaller family's marker not sought. The most isolated (the
+// whitest ring around the box) come first.
 std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& grey,
                                       const SecondLook& look, const std::vector<cv::Rect>& taken);
 

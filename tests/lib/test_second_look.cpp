@@ -205,7 +205,7 @@ TEST(NearCandidates, ResolvedMarkersOfLargerFamiliesAreNot) {
   const cv::Mat1b black = resolved_marker(four, 3, cv::Size(400, 200), 20, 40) |
                           resolved_marker(five, 3, cv::Size(400, 200), 220, 40);
   detail::SecondLook upto3, upto4;
-  upto3.max_n = 3, upto4.max_n = 4;
+  upto3.sought = 0b1100, upto4.sought = 0b11100;  // bit n: n x n
   EXPECT_TRUE(clusters_of(black, {}, upto3).empty());
   const std::vector<cv::Rect> four_only = clusters_of(black, {}, upto4);
   ASSERT_EQ(four_only.size(), 1u);
@@ -233,6 +233,42 @@ TEST(NearCandidates, ResolvedMarkersOfLargerFamiliesAreNot) {
   for (int i = 0; i < 4; ++i)
     for (int j = 0; j < 4; ++j) small(cv::Rect(34 + 7 * j, 34 + 7 * i, 4, 4)).setTo(255);
   EXPECT_TRUE(clusters_of(small, {}, upto3).empty());
+}
+
+TEST(NearCandidates, SharpResolvedMarkersOfSmallerFamiliesNotSoughtAreNot) {
+  // A sharp 5x5 marker at 2 px per unit, turned by 30 degrees: 72 px, its features a few
+  // pixels wide, so a sharp cluster of fine features like any other. With 5x5 and 8x8
+  // sought it is looked at; with 8x8 alone its binary image shows a 5x5 marker's squares
+  // and explains its grey levels, so it is not.
+  const Family five(5);
+  const auto turned = [&](const cv::Mat1b& black) {
+    cv::Mat1b out;
+    const cv::Point2f centre(black.cols / 2.0f, black.rows / 2.0f);
+    cv::warpAffine(black, out, cv::getRotationMatrix2D(centre, 30, 1), black.size(), cv::INTER_NEAREST);
+    return out;
+  };
+  const cv::Mat1b marker = turned(resolved_marker(five, 2, cv::Size(200, 200), 64, 64));
+  cv::Mat1b noise(marker.size());
+  cv::randn(noise, 0, 3);
+  cv::Mat1b sharp = grey_of(marker, 0);
+  sharp += noise;
+  detail::SecondLook five_and_eight, eight;
+  five_and_eight.sought = 0b100100000, eight.sought = 0b100000000;  // bit n: n x n
+  EXPECT_EQ(clusters_of(marker, {}, five_and_eight, sharp).size(), 1u);
+  EXPECT_TRUE(clusters_of(marker, {}, eight, sharp).empty());
+  // Blurred by 2 px it is looked at: a blur that joins a larger marker's squares leaves
+  // mid grey between them.
+  EXPECT_EQ(clusters_of(marker, {}, eight, grey_of(marker, 2)).size(), 1u);
+  // So is one with a square 2.5 times the others, as two joined squares of a larger
+  // marker would be.
+  cv::Mat1b uneven = resolved_marker(five, 2, cv::Size(200, 200), 64, 64);
+  const cv::Rect square(64 + 2 * 10, 64 + 2 * 16, 6, 6);  // the data square of row 2, column 1
+  ASSERT_EQ(cv::countNonZero(uneven(square)), 36);
+  uneven(cv::Rect(square.x - 2, square.y - 1, 10, 9)).setTo(255);
+  uneven = turned(uneven);
+  sharp = grey_of(uneven, 0);
+  sharp += noise;
+  EXPECT_EQ(clusters_of(uneven, {}, eight, sharp).size(), 1u);
 }
 
 TEST(NearCandidates, SharpClustersOfAMarkersSizeAreNotLookedAtAgain) {
