@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 #include <opencv2/imgproc.hpp>
@@ -51,11 +52,23 @@ double ring_ink(const BinaryImage& binary, const Cluster& b) {
   return count ? double(black) / count : 1.0;
 }
 
-// The convex hull of some regions' pixels (frame pixels): that of the ends of their runs.
+// The convex hull of some regions' pixels (frame pixels): that of the first and last
+// pixels of each row (a marker's regions have thousands of runs, and the hull of their
+// ends was most of the search's time in frames crowded with markers).
 std::vector<cv::Point> region_hull(const RegionTree& tree, const std::vector<int>& regions) {
-  std::vector<cv::Point> ends, hull;
+  if (regions.empty()) return {};
+  int y0 = tree.regions[regions[0]].y0, y1 = tree.regions[regions[0]].y1;
+  for (const int r : regions) y0 = std::min(y0, tree.regions[r].y0), y1 = std::max(y1, tree.regions[r].y1);
+  thread_local std::vector<std::pair<int, int>> rows;  // first and last pixel of each row
+  rows.assign(y1 - y0 + 1, {std::numeric_limits<int>::max(), std::numeric_limits<int>::min()});
   for (const int r : regions)
-    tree.for_each_run(r, [&](int y, int x0, int x1) { ends.emplace_back(x0, y), ends.emplace_back(x1 - 1, y); });
+    tree.for_each_run(r, [&](int y, int x0, int x1) {
+      auto& [first, last] = rows[y - y0];
+      first = std::min(first, x0), last = std::max(last, x1 - 1);
+    });
+  std::vector<cv::Point> ends, hull;
+  for (int y = y0; y <= y1; ++y)
+    if (const auto [first, last] = rows[y - y0]; first <= last) ends.emplace_back(first, y), ends.emplace_back(last, y);
   cv::convexHull(ends, hull);
   return hull;
 }
