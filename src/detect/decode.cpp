@@ -299,16 +299,35 @@ bool assign_cells(const Candidate& c, const KeyPoints& k, const CellCentres& pro
   d.blob_of_cell.assign(f.cell_count(), -1);
   d.blob_of_cell[kc[0]] = k.blob[0], d.blob_of_cell[kc[1]] = k.blob[1];
   used[k.blob[0]] = used[k.blob[1]] = 1;
+  // The blobs in the order of x: the search for the nearest blob stops where x alone puts
+  // the rest further than the nearest so far (an 8x8 marker's 64 blobs were each measured
+  // from every position of every cell, under each of the 16 hypotheses).
+  thread_local std::vector<int> by_x;
+  thread_local std::vector<double> xs;
+  by_x.clear();
+  for (int j = 0; j < int(c.blobs.size()); ++j)
+    if (std::isfinite(c.blobs[j].point.x) && std::isfinite(c.blobs[j].point.y)) by_x.push_back(j);
+  std::sort(by_x.begin(), by_x.end(), [&](int a, int b) { return c.blobs[a].point.x < c.blobs[b].point.x; });
+  xs.resize(by_x.size());
+  for (std::size_t i = 0; i < by_x.size(); ++i) xs[i] = c.blobs[by_x[i]].point.x;
   for (int g = 0; g < f.cell_count(); ++g) {
     if (f.is_baseline(g)) continue;
+    // The least distance wins; of equal ones, the first position, then the first blob.
     double nearest = std::numeric_limits<double>::max();
-    int blob = -1;
+    int blob = -1, blob_position = -1;
     for (int v = 0; v < 4; ++v) {
       const cv::Point2d p = projected[g][v];
-      for (int j = 0; j < int(c.blobs.size()); ++j) {
+      if (!std::isfinite(p.x) || !std::isfinite(p.y)) continue;
+      const auto consider = [&](std::size_t i) {
+        const int j = by_x[i];
         const cv::Point2d e = c.blobs[j].point - p;
-        if (e.dot(e) < nearest) nearest = e.dot(e), blob = j;
-      }
+        const double distance = e.dot(e);
+        if (distance < nearest || (distance == nearest && v == blob_position && j < blob))
+          nearest = distance, blob = j, blob_position = v;
+      };
+      const std::size_t first = std::size_t(std::lower_bound(xs.begin(), xs.end(), p.x) - xs.begin());
+      for (std::size_t i = first; i < xs.size() && (xs[i] - p.x) * (xs[i] - p.x) <= nearest; ++i) consider(i);
+      for (std::size_t i = first; i-- > 0 && (p.x - xs[i]) * (p.x - xs[i]) <= nearest;) consider(i);
     }
     if (blob < 0 || used[blob]) return false;  // no finite projection, or a blob claimed twice
     used[blob] = 1;
