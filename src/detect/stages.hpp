@@ -179,8 +179,8 @@ struct SecondLook {
   int min_size = 6;   // frame pixels, the cluster's longer side
   int max_size = 192;
   int enlarge_below = 64;  // clusters smaller than this are enlarged twice
-  // The n x n families sought (bit n): the largest decides which resolved markers are
-  // not looked at (see near_candidates).
+  // The n x n families sought (bit n): resolved markers of the others are not looked at
+  // again (see near_candidates).
   std::bitset<Family::kMaxN + 1> sought = std::bitset<Family::kMaxN + 1>().set().reset(0).reset(1);
   int max_n() const {
     int n = Family::kMaxN;
