@@ -288,10 +288,26 @@ void project_centres(const CellCentres& design, const cv::Matx33d& h, CellCentre
     for (int v = 0; v < 4; ++v) out[g][v] = apply(h, design[g][v]);
 }
 
+// A candidate's blobs with finite centroids in the order of x, and their x: the search
+// for the nearest blob stops where x alone puts the rest further than the nearest so far
+// (an 8x8 marker's 64 blobs were each measured from every position of every cell, under
+// each of the 16 hypotheses). Sorted once per candidate.
+struct BlobsByX {
+  std::vector<int> index;
+  std::vector<double> x;
+  explicit BlobsByX(const Candidate& c) {
+    for (int j = 0; j < int(c.blobs.size()); ++j)
+      if (std::isfinite(c.blobs[j].point.x) && std::isfinite(c.blobs[j].point.y)) index.push_back(j);
+    std::sort(index.begin(), index.end(), [&](int a, int b) { return c.blobs[a].point.x < c.blobs[b].point.x; });
+    for (const int j : index) x.push_back(c.blobs[j].point.x);
+  }
+};
+
 // Under a homography whose design centres project to `projected`, each data cell takes
 // the blob and position (of its four) nearest to each other. False when two cells claim
 // one blob: then the homography cannot be this marker's.
-bool assign_cells(const Candidate& c, const KeyPoints& k, const CellCentres& projected, Decoding& d) {
+bool assign_cells(const Candidate& c, const BlobsByX& by_x, const KeyPoints& k, const CellCentres& projected,
+                  Decoding& d) {
   const Family& f = c.family;
   const std::array<int, 4> kc = f.keypoint_cells();
   thread_local std::vector<char> used;
@@ -299,17 +315,7 @@ bool assign_cells(const Candidate& c, const KeyPoints& k, const CellCentres& pro
   d.blob_of_cell.assign(f.cell_count(), -1);
   d.blob_of_cell[kc[0]] = k.blob[0], d.blob_of_cell[kc[1]] = k.blob[1];
   used[k.blob[0]] = used[k.blob[1]] = 1;
-  // The blobs in the order of x: the search for the nearest blob stops where x alone puts
-  // the rest further than the nearest so far (an 8x8 marker's 64 blobs were each measured
-  // from every position of every cell, under each of the 16 hypotheses).
-  thread_local std::vector<int> by_x;
-  thread_local std::vector<double> xs;
-  by_x.clear();
-  for (int j = 0; j < int(c.blobs.size()); ++j)
-    if (std::isfinite(c.blobs[j].point.x) && std::isfinite(c.blobs[j].point.y)) by_x.push_back(j);
-  std::sort(by_x.begin(), by_x.end(), [&](int a, int b) { return c.blobs[a].point.x < c.blobs[b].point.x; });
-  xs.resize(by_x.size());
-  for (std::size_t i = 0; i < by_x.size(); ++i) xs[i] = c.blobs[by_x[i]].point.x;
+  const std::vector<double>& xs = by_x.x;
   for (int g = 0; g < f.cell_count(); ++g) {
     if (f.is_baseline(g)) continue;
     // The least distance wins; of equal ones, the first position, then the first blob.
@@ -319,7 +325,7 @@ bool assign_cells(const Candidate& c, const KeyPoints& k, const CellCentres& pro
       const cv::Point2d p = projected[g][v];
       if (!std::isfinite(p.x) || !std::isfinite(p.y)) continue;
       const auto consider = [&](std::size_t i) {
-        const int j = by_x[i];
+        const int j = by_x.index[i];
         const cv::Point2d e = c.blobs[j].point - p;
         const double distance = e.dot(e);
         if (distance < nearest || (distance == nearest && v == blob_position && j < blob))
@@ -426,6 +432,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   };
   std::vector<Refit> refits;
   int resolved = 0, placed = 0, passing = 0;
+  const BlobsByX by_x(c);
   for (int hypothesis = 0; hypothesis < 16; ++hypothesis) {
     auto start = std::chrono::steady_clock::now();
     const int d2 = hypothesis / 4, d3 = hypothesis % 4;
@@ -443,7 +450,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
       continue;
     }
     project_centres(design, d.homography, projected);
-    if (!assign_cells(c, k, projected, d)) {
+    if (!assign_cells(c, by_x, k, projected, d)) {
       stats.decode_ms += elapsed_ms(start);
       continue;
     }

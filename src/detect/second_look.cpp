@@ -146,18 +146,19 @@ constexpr double kMaxSmallerMarkerSpread = 2.3;
 // Ink on the grown hull of a region whose cluster outgrew a marker, at most: its own margin.
 constexpr double kCleanMargin = 0.02;
 
-int unsought_marker(const RegionTree& tree, int r, const SecondLook& look) {
+// `max_n`: the largest n of the families `sought`.
+int unsought_marker(const RegionTree& tree, int r, const std::bitset<Family::kMaxN + 1>& sought, int max_n) {
   const int hole = largest_hole(tree, r);
   if (hole < 0) return 0;
   const Region& white = tree.regions[hole];
   const int n = int(std::lround(std::sqrt(double(white.child_count))));
-  if (n < 2 || n > Family::kMaxN || n * n != white.child_count || look.sought[n]) return 0;
+  if (n < 2 || n > Family::kMaxN || n * n != white.child_count || sought[n]) return 0;
   int smallest = white.area, largest = 0;
   for (int i = 0; i < white.child_count; ++i) {
     const int area = tree.regions[tree.children_of(hole)[i]].area;
     smallest = std::min(smallest, area), largest = std::max(largest, area);
   }
-  const double spread = n > look.max_n() ? 3 : kMaxSmallerMarkerSpread;
+  const double spread = n > max_n ? 3 : kMaxSmallerMarkerSpread;
   return smallest >= kMinSquarePixels && largest <= spread * smallest ? n : 0;
 }
 
@@ -236,6 +237,7 @@ constexpr double kResolvedFeatureWidth = 8;  // px
 
 std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& grey,
                                       const SecondLook& look, const std::vector<cv::Rect>& taken) {
+  const int max_n = look.max_n();
   // Small black regions, clustered when their boxes touch or overlap (a far marker's
   // border breaks into pieces on the diagonals). Each starts as a cluster of its own. The
   // tree numbers regions in the raster order of their first pixels, so their tops never
@@ -245,9 +247,9 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const Region& g = tree.regions[r];
     if (!g.black || g.area < 2) continue;
     if (g.x1 - g.x0 + 1 > look.max_size || g.y1 - g.y0 + 1 > look.max_size) continue;
-    const int unsought = unsought_marker(tree, r, look);
-    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count, unsought > look.max_n(),
-                     unsought != 0 && unsought < look.max_n(), r});
+    const int unsought = unsought_marker(tree, r, look.sought, max_n);
+    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count, unsought > max_n,
+                     unsought != 0 && unsought < max_n, r});
   }
   std::vector<int> parent(small.size());
   std::iota(parent.begin(), parent.end(), 0);
@@ -332,8 +334,8 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     if (!g.black || g.child_count == 0) continue;
     const int w = g.x1 - g.x0 + 1, h = g.y1 - g.y0 + 1;
     if (!marker_sized(w, h)) continue;
-    const int unsought = unsought_marker(tree, r, look);
-    if (unsought > look.max_n()) continue;
+    const int unsought = unsought_marker(tree, r, look.sought, max_n);
+    if (unsought > max_n) continue;
     // Its largest hole with what the hole holds: the marker inside its border.
     const int hole = largest_hole(tree, r);
     const Region& white = tree.regions[hole];
