@@ -33,6 +33,9 @@ constexpr std::array<double, 3> kDefocusUnits = {0.7, 1.1, 1.5};
 // runner-up 5 standard deviations of the noise away. Measured: true readings 17 to 900,
 // misreadings of dim (25 grey levels) defocused markers 7 to 10.
 constexpr double kMinNoiseMargin = 25;
+// From this ratio of a defocus's longest axis in the template to its geometric mean
+// (1 / sqrt(cos tilt): tilts of about 37 degrees), the defocus is sought uneven.
+constexpr double kMinDefocusStretch = 1.12;
 
 // The fixed structure along one axis of the marker: 0 black, 1 white, 0.5 a data strip.
 double axis_class(double u, int side) {
@@ -219,6 +222,25 @@ class SparseTemplate {
 cv::Mat1f blurred_template(const cv::Mat1f& sharp, double sigma, bool paper_beyond = false) {
   cv::Mat1f out;
   cv::GaussianBlur(sharp, out, cv::Size(), sigma, sigma, paper_beyond ? cv::BORDER_REPLICATE : cv::BORDER_REFLECT_101);
+  return out;
+}
+
+// A template blurred by a Gaussian of `covariance` (template pixels squared), the paper
+// beyond its white ring staying white: a defocus blurs the frame evenly, which on a tilted
+// marker is a blur of its template longer across the tilt's axis than along it.
+cv::Mat1f blurred_template(const cv::Mat1f& sharp, const cv::Matx22d& covariance) {
+  const cv::Matx22d inverse = covariance.inv();
+  const double widest = std::sqrt(0.5 * (covariance(0, 0) + covariance(1, 1)) +
+                                  std::hypot(0.5 * (covariance(0, 0) - covariance(1, 1)), covariance(0, 1)));
+  const int half = std::max(1, int(std::ceil(3 * widest)));
+  cv::Mat1f kernel(2 * half + 1, 2 * half + 1);
+  for (int y = -half; y <= half; ++y)
+    for (int x = -half; x <= half; ++x)
+      kernel(y + half, x + half) =
+          float(std::exp(-0.5 * (inverse(0, 0) * x * x + 2 * inverse(0, 1) * x * y + inverse(1, 1) * y * y)));
+  kernel /= cv::sum(kernel)[0];
+  cv::Mat1f out;
+  cv::filter2D(sharp, out, -1, kernel, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
   return out;
 }
 
@@ -758,13 +780,14 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
   };
   std::vector<std::pair<double, std::vector<cv::Point>>> hulls, rings;  // area, hull
   std::vector<cv::Point> points;
-  // Whether piece j is closed around a hole that holds two or more pieces: a marker's
-  // border around its squares.
-  const auto closed_around_pieces = [&](int j) {
+  // Whether piece j is closed around a hole that holds two or more pieces, or that is a
+  // tenth of its hull or more: a marker's border around its squares, some of which may
+  // have joined it.
+  const auto closed_around_pieces = [&](int j, double hull_area) {
     for (int hole = hierarchy[j][2]; hole >= 0; hole = hierarchy[hole][0]) {
       int held = 0;
       for (int k = hierarchy[hole][2]; k >= 0 && held < 2; k = hierarchy[k][0]) ++held;
-      if (held >= 2) return true;
+      if (held >= 2 || cv::contourArea(contours[hole]) >= 0.1 * hull_area) return true;
     }
     return false;
   };
@@ -785,12 +808,13 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     // ground seen through the local threshold, open where the sheet meets the patch's
     // bright surroundings) would otherwise be its group and hide it.
     if (pieces.size() > 1)
-      for (const int j : pieces)
-        if (closed_around_pieces(j)) {
-          std::vector<cv::Point> hull;
-          cv::convexHull(contours[j], hull);
-          rings.emplace_back(cv::contourArea(hull), std::move(hull));
-        }
+      for (const int j : pieces) {
+        if (hierarchy[j][2] < 0) continue;
+        std::vector<cv::Point> hull;
+        cv::convexHull(contours[j], hull);
+        const double area = cv::contourArea(hull);
+        if (closed_around_pieces(j, area)) rings.emplace_back(area, std::move(hull));
+      }
     // The group grown from its largest piece by the pieces within a tenth of the group's
     // size: a speck of the margin or of the ground further off would pull a corner of the
     // hull out. Only specks are left out (at most a tenth of the group by the area of
@@ -1018,14 +1042,17 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   cv::Point2d smear, smear_crop;  // frame pixels, crop pixels
   // A smear of the crop in the pixels of a template that `warp_to_crop` maps onto it (its
   // linear part at the template's centre); none (zero) from a warp far from a marker's.
-  const auto template_smear = [&](const cv::Mat& warp_to_crop, cv::Point2d along) {
+  // The linear part of `warp_to_crop` (template pixels -> crop pixels) at the template's centre.
+  const auto jacobian_at_centre = [&](const cv::Mat& warp_to_crop) {
     const cv::Matx33f wf = warp_to_crop;
     const float cx = templ.cols / 2.0f, cy = templ.rows / 2.0f;
     const float z = wf(2, 0) * cx + wf(2, 1) * cy + wf(2, 2);
     const float mx = (wf(0, 0) * cx + wf(0, 1) * cy + wf(0, 2)) / z, my = (wf(1, 0) * cx + wf(1, 1) * cy + wf(1, 2)) / z;
-    const cv::Matx22d jacobian((wf(0, 0) - mx * wf(2, 0)) / z, (wf(0, 1) - mx * wf(2, 1)) / z,
-                               (wf(1, 0) - my * wf(2, 0)) / z, (wf(1, 1) - my * wf(2, 1)) / z);
-    const cv::Vec2d t = jacobian.inv() * cv::Vec2d(along.x, along.y);
+    return cv::Matx22d((wf(0, 0) - mx * wf(2, 0)) / z, (wf(0, 1) - mx * wf(2, 1)) / z, (wf(1, 0) - my * wf(2, 0)) / z,
+                       (wf(1, 1) - my * wf(2, 1)) / z);
+  };
+  const auto template_smear = [&](const cv::Mat& warp_to_crop, cv::Point2d along) {
+    const cv::Vec2d t = jacobian_at_centre(warp_to_crop).inv() * cv::Vec2d(along.x, along.y);
     const cv::Point2d out(t[0], t[1]);
     return cv::norm(out) <= 2 * (kMaxSmear + 1) * kTemplateScale ? out : cv::Point2d();
   };
@@ -1047,14 +1074,31 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // margins stay measured against the contrast seen, as every other reading's are.
   double contrast_scale = 1;
   double defocus = 0;  // units, beyond the template's own blur (0: none found)
+  // A defocus blurs the frame evenly: under `warp_to_crop`, a blur of `units` is in
+  // template pixels one of the shape (J^T J)^-1 |det J| (determinant one; the identity on
+  // a marker seen face on), J the warp's linear part, beside the template's own. None when
+  // it stretches less than kMinDefocusStretch, where a round blur does as well.
+  const auto uneven_defocus = [&](const cv::Mat& warp_to_crop, double units) -> std::optional<cv::Matx22d> {
+    const cv::Matx22d jacobian = jacobian_at_centre(warp_to_crop);
+    const cv::Matx22d shape = (jacobian.t() * jacobian).inv() * std::abs(cv::determinant(jacobian));
+    const double half_trace = (shape(0, 0) + shape(1, 1)) / 2;
+    const double stretch = std::sqrt(half_trace + std::sqrt(std::max(0.0, half_trace * half_trace - 1)));
+    if (!std::isfinite(stretch) || stretch < kMinDefocusStretch) return std::nullopt;
+    return cv::Matx22d::eye() * (template_blur(per_unit) * template_blur(per_unit)) +
+           shape * std::pow(units * kTemplateScale, 2);
+  };
+  bool uneven = false;  // the defocus found is uneven in the template
   const auto try_defocus = [&](double to_beat) {
     double best = to_beat, best_sigma = 0, best_units = 0;
     cv::Mat1f best_template;
+    bool best_uneven = false;
     for (const double units : kDefocusUnits) {
       const double blur = std::hypot(sigma, units * kTemplateScale);
-      const cv::Mat1f blurred = blurred_template(sharp_structure(family), blur, true);
+      const std::optional<cv::Matx22d> covariance = uneven_defocus(warp, units);
+      const cv::Mat1f blurred = covariance ? blurred_template(sharp_structure(family), *covariance)
+                                           : blurred_template(sharp_structure(family), blur, true);
       if (const double c = SparseTemplate(blurred, 3).correlation(crop, warp); c > best)
-        best = c, best_sigma = blur, best_units = units, best_template = blurred;
+        best = c, best_sigma = blur, best_units = units, best_template = blurred, best_uneven = bool(covariance);
     }
     if (best_template.empty()) return false;
     cv::Mat again = warp.clone();
@@ -1064,6 +1108,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       if (c <= correlation) return true;  // the sharper alignment stands, and no smear beats it
       contrast_scale = structure_contrast(templ) / structure_contrast(best_template);
       correlation = c, warp = again, templ = best_template, sigma = best_sigma, defocus = best_units;
+      uneven = best_uneven;
     } catch (const cv::Exception&) {
       // the sharper alignment stands
     }
@@ -1187,10 +1232,14 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   cv::Matx33d current = h;
   for (int attempt = 0; attempt < 3; ++attempt) {
     cv::Mat1f whole = marker_template(family, out.id);
-    if (sigma > 0.3) whole = blurred_template(whole, sigma, defocus > 0);
     const cv::Matx33d start = from_frame * current * to_template.inv();
     cv::Mat refined(3, 3, CV_32F);
     for (int i = 0; i < 9; ++i) refined.at<float>(i / 3, i % 3) = float(start.val[i] / start.val[8]);
+    // (The marker's true turn: an uneven blur is shaped under its own warp.)
+    if (const auto covariance = uneven ? uneven_defocus(refined, defocus) : std::nullopt)
+      whole = blurred_template(whole, *covariance);
+    else if (sigma > 0.3)
+      whole = blurred_template(whole, sigma, defocus > 0);
     if (smear_crop != cv::Point2d()) whole = smeared(whole, template_kernel(refined, smear_crop));
     try {
       out.marker_correlation =

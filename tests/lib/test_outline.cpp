@@ -260,9 +260,10 @@ TEST(OutlineReading, ReadsDefocusedMarkersOfAboutAPixelPerUnit) {
 TEST(OutlineReading, ReadsDefocusedMarkersSeenObliquely) {
   // The same markers tilted by 60 degrees at 7.5 m: about 0.7 px per unit across the
   // tilt. Against the sharper template many align under 0.6, where no blur was sought
-  // before (6 of the 60 read so); the defocus is sought from 0.55 (20 read; 19 in the
-  // sanitizer build, whose compiler rounds differently), and those read are read right,
-  // every one under a defocus found.
+  // before (6 of the 60 read so); the defocus is sought from 0.55 (20 read), and as the
+  // frame blurs them: in the template, twice as long across the tilt's axis as along it
+  // (50 read; 20 with a round blur). Those read are read right, every one under a
+  // defocus found.
   std::mt19937_64 rng(23);
   DetectorParams params;
   int read = 0;
@@ -275,7 +276,7 @@ TEST(OutlineReading, ReadsDefocusedMarkersSeenObliquely) {
     EXPECT_EQ(reading->id, id) << "trial " << trial;
     EXPECT_GT(reading->defocus, 0) << "trial " << trial;
   }
-  EXPECT_GE(read, 12);
+  EXPECT_GE(read, 40);
 }
 
 TEST(OutlineReading, DimDefocusedMarkersAreNeverMisread) {
@@ -441,6 +442,34 @@ TEST(CoarseOutlines, TriesABorderAroundSquaresAloneBesideTheGroundsEdge) {
   PatchFrame frame;  // the frame's own pixels
   const auto outlines = coarse_outlines(test::binary_from_mask(black), frame);
   const std::array<cv::Point2d, 4> corners = {cv::Point2d(34, 35), {59, 35}, {59, 60}, {34, 60}};
+  bool found = false;
+  for (const auto& o : outlines) {
+    double worst = 0;
+    for (const cv::Point2d& c : corners) {
+      double nearest = 1e9;
+      for (const cv::Point2d& q : o) nearest = std::min(nearest, cv::norm(q - c));
+      worst = std::max(worst, nearest);
+    }
+    found |= worst < 1.5;
+  }
+  EXPECT_TRUE(found) << outlines.size() << " outlines";
+}
+
+TEST(CoarseOutlines, TriesABorderJoinedByItsSquaresAloneBesideTheGroundsSpecks) {
+  // A defocused marker seen obliquely in a video frame, binarised: most of its squares
+  // joined its border, so its hole holds one piece, and specks of the ground lie within
+  // the group's reach off two corners, pulling the group's hull out. The border, closed
+  // around a hole of a tenth of its hull or more, is also tried alone.
+  cv::Mat1b black(140, 140, std::uint8_t(0));
+  black(cv::Rect(40, 40, 60, 60)).setTo(255);
+  black(cv::Rect(46, 46, 48, 48)).setTo(0);  // the border, 6 px wide
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) black(cv::Rect(46 + 18 * c, 46 + 18 * r, 12, 12)).setTo(255);  // the outer 8 touch it
+  black(cv::Rect(31, 31, 5, 5)).setTo(255);  // the ground's specks
+  black(cv::Rect(104, 32, 6, 4)).setTo(255);
+  PatchFrame frame;  // the frame's own pixels
+  const auto outlines = coarse_outlines(test::binary_from_mask(black), frame);
+  const std::array<cv::Point2d, 4> corners = {cv::Point2d(40, 40), {99, 40}, {99, 99}, {40, 99}};
   bool found = false;
   for (const auto& o : outlines) {
     double worst = 0;
