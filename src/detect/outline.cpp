@@ -780,14 +780,14 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
   };
   std::vector<std::pair<double, std::vector<cv::Point>>> hulls, rings;  // area, hull
   std::vector<cv::Point> points;
-  // Whether piece j is closed around a hole that holds two or more pieces, or that is a
-  // tenth of its hull or more: a marker's border around its squares, some of which may
-  // have joined it.
+  // Whether piece j is closed around a hole that holds two or more pieces, or one piece
+  // and is a tenth of its hull or more: a marker's border around its squares, some of
+  // which may have joined it.
   const auto closed_around_pieces = [&](int j, double hull_area) {
     for (int hole = hierarchy[j][2]; hole >= 0; hole = hierarchy[hole][0]) {
       int held = 0;
       for (int k = hierarchy[hole][2]; k >= 0 && held < 2; k = hierarchy[k][0]) ++held;
-      if (held >= 2 || cv::contourArea(contours[hole]) >= 0.1 * hull_area) return true;
+      if (held >= 2 || (held == 1 && cv::contourArea(contours[hole]) >= 0.1 * hull_area)) return true;
     }
     return false;
   };

@@ -215,7 +215,8 @@ void binarise_patch(const Patch& patch, double level, BinaryImage& out);
 // ---------------------------------------------------------------- outline.cpp
 // The quadrilateral outlines of the largest groups of black pieces of a patch's binary
 // image that lie in one white region clear of the patch's edge, without specks far from
-// the rest, then of the pieces of such groups closed around two or more pieces, alone
+// the rest, then of the pieces of such groups closed around their squares (a hole that
+// holds two or more pieces, or one and is a tenth of the piece's hull or more), alone
 // (at most three, the groups largest first), in frame pixels, clockwise on screen.
 std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binary, const PatchFrame& frame);
 
