@@ -1040,8 +1040,6 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // structure that aligned but correlates too little is tried smeared in several
   // directions and lengths, and aligned again with the one that correlates best.
   cv::Point2d smear, smear_crop;  // frame pixels, crop pixels
-  // A smear of the crop in the pixels of a template that `warp_to_crop` maps onto it (its
-  // linear part at the template's centre); none (zero) from a warp far from a marker's.
   // The linear part of `warp_to_crop` (template pixels -> crop pixels) at the template's centre.
   const auto jacobian_at_centre = [&](const cv::Mat& warp_to_crop) {
     const cv::Matx33f wf = warp_to_crop;
@@ -1051,6 +1049,8 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     return cv::Matx22d((wf(0, 0) - mx * wf(2, 0)) / z, (wf(0, 1) - mx * wf(2, 1)) / z, (wf(1, 0) - my * wf(2, 0)) / z,
                        (wf(1, 1) - my * wf(2, 1)) / z);
   };
+  // A smear of the crop in the pixels of a template that `warp_to_crop` maps onto it (its
+  // linear part at the template's centre); none (zero) from a warp far from a marker's.
   const auto template_smear = [&](const cv::Mat& warp_to_crop, cv::Point2d along) {
     const cv::Vec2d t = jacobian_at_centre(warp_to_crop).inv() * cv::Vec2d(along.x, along.y);
     const cv::Point2d out(t[0], t[1]);
