@@ -1179,7 +1179,9 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   out.pixels_per_unit = smallest_scale(aligned, {side / 2.0, side / 2.0});
   out.contrast = (white - black) * contrast_scale;
   out.defocus = defocus;
-  if (out.contrast <= 0) return std::nullopt;
+  // A ring as dark as the cores (a defocus of more than those sought mixes them): the
+  // reading fails the contrast check, and the trace says so.
+  if (out.contrast <= 0) return out;
   const auto level = [&](double g) { return (g - black) / (white - black); };
   // A baseline square covers both strips of both axes: its brightest strip is dark.
   const auto baseline_likeness = [&](const CellLevels& l) {
