@@ -36,6 +36,9 @@ constexpr double kMinNoiseMargin = 25;
 // From this ratio of a defocus's longest axis in the template to its geometric mean
 // (1 / sqrt(cos tilt): tilts of about 37 degrees), the defocus is sought uneven.
 constexpr double kMinDefocusStretch = 1.12;
+// And up to this one (tilts of about 86 degrees, beyond every marker read in the angle
+// sweep, 84.5 at most): a warp stretched further is no marker's.
+constexpr double kMaxDefocusStretch = 4;
 
 // The fixed structure along one axis of the marker: 0 black, 1 white, 0.5 a data strip.
 double axis_class(double u, int side) {
@@ -232,7 +235,9 @@ cv::Mat1f blurred_template(const cv::Mat1f& sharp, const cv::Matx22d& covariance
   const cv::Matx22d inverse = covariance.inv();
   const double widest = std::sqrt(0.5 * (covariance(0, 0) + covariance(1, 1)) +
                                   std::hypot(0.5 * (covariance(0, 0) - covariance(1, 1)), covariance(0, 1)));
-  const int half = std::max(1, int(std::ceil(3 * widest)));
+  // A kernel wider than the template adds nothing (and a near-singular warp would ask for
+  // one of billions of taps).
+  const int half = int(std::clamp(std::ceil(3 * widest), 1.0, double(std::max(sharp.rows, sharp.cols))));
   cv::Mat1f kernel(2 * half + 1, 2 * half + 1);
   for (int y = -half; y <= half; ++y)
     for (int x = -half; x <= half; ++x)
@@ -1077,13 +1082,14 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // A defocus blurs the frame evenly: under `warp_to_crop`, a blur of `units` is in
   // template pixels one of the shape (J^T J)^-1 |det J| (determinant one; the identity on
   // a marker seen face on), J the warp's linear part, beside the template's own. None when
-  // it stretches less than kMinDefocusStretch, where a round blur does as well.
+  // it stretches less than kMinDefocusStretch, where a round blur does as well, or more
+  // than kMaxDefocusStretch.
   const auto uneven_defocus = [&](const cv::Mat& warp_to_crop, double units) -> std::optional<cv::Matx22d> {
     const cv::Matx22d jacobian = jacobian_at_centre(warp_to_crop);
     const cv::Matx22d shape = (jacobian.t() * jacobian).inv() * std::abs(cv::determinant(jacobian));
     const double half_trace = (shape(0, 0) + shape(1, 1)) / 2;
     const double stretch = std::sqrt(half_trace + std::sqrt(std::max(0.0, half_trace * half_trace - 1)));
-    if (!std::isfinite(stretch) || stretch < kMinDefocusStretch) return std::nullopt;
+    if (!std::isfinite(stretch) || stretch < kMinDefocusStretch || stretch > kMaxDefocusStretch) return std::nullopt;
     return cv::Matx22d::eye() * (template_blur(per_unit) * template_blur(per_unit)) +
            shape * std::pow(units * kTemplateScale, 2);
   };
