@@ -202,9 +202,9 @@ TEST(OutlineReading, FindsTheLengthOfAMotionBlur) {
   }
 }
 
-// A 4x4 marker of about 32 px at 10 m (about 1.05 px per unit), tilted by `tilt` degrees on
-// a mid-grey background, defocused by a Gaussian of 1.45 px, with sensor noise and JPEG
-// at quality 60 (the realistic video's worst clips); ink and paper albedos as given.
+// A marker (4x4: about 32 px at 10 m, 1.05 px per unit), tilted by `tilt` degrees on a
+// mid-grey background, defocused by a Gaussian of 1.45 px, with sensor noise and JPEG at
+// quality 60 (the realistic video's worst clips); ink and paper albedos as given.
 Far defocused_marker(TagId id, double distance, double ink, double paper, std::mt19937_64& rng, double tilt = 20,
                      Family family = Family(4)) {
   std::uniform_real_distribution<double> u(-1, 1);
@@ -231,6 +231,21 @@ Far defocused_marker(TagId id, double distance, double ink, double paper, std::m
   return far;
 }
 
+// A random marker of `family` drawn by defocused_marker, and its outline read from a
+// coarse outline of it (the trial's turn, corners off by up to half a pixel).
+struct Defocused {
+  TagId id;
+  Far far;
+  std::optional<OutlineReading> reading;
+};
+Defocused read_defocused(const Family& family, double distance, double ink, double paper, double tilt, int trial,
+                         std::mt19937_64& rng) {
+  const TagId id = random_id(family, rng);
+  Far far = defocused_marker(id, distance, ink, paper, rng, tilt, family);
+  auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.5, rng), family);
+  return {id, std::move(far), std::move(reading)};
+}
+
 TEST(OutlineReading, ReadsDefocusedMarkersOfAboutAPixelPerUnit) {
   // Against the template blurred only by its pixels the structure correlates under 0.75
   // and the contrast looks a third of the ink's (none of the ten was read so); blurred by
@@ -241,9 +256,7 @@ TEST(OutlineReading, ReadsDefocusedMarkersOfAboutAPixelPerUnit) {
   DetectorParams params;
   int read = 0;
   for (int trial = 0; trial < 10; ++trial) {
-    const TagId id = random_id(Family(4), rng);
-    const Far far = defocused_marker(id, 10, 0.05, 0.9, rng);
-    const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.5, rng), Family(4));
+    const auto [id, far, reading] = read_defocused(Family(4), 10, 0.05, 0.9, 20, trial, rng);
     ASSERT_TRUE(reading) << "trial " << trial;
     if (!acceptable(*reading, params)) continue;
     ++read;
@@ -269,9 +282,7 @@ TEST(OutlineReading, ReadsDefocusedMarkersSeenObliquely) {
   DetectorParams params;
   int read = 0;
   for (int trial = 0; trial < 60; ++trial) {
-    const TagId id = random_id(Family(4), rng);
-    const Far far = defocused_marker(id, 7.5, 0.05, 0.9, rng, 60);
-    const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.5, rng), Family(4));
+    const auto [id, far, reading] = read_defocused(Family(4), 7.5, 0.05, 0.9, 60, trial, rng);
     if (!reading || !acceptable(*reading, params)) continue;
     ++read;
     EXPECT_EQ(reading->id, id) << "trial " << trial;
@@ -289,11 +300,11 @@ TEST(OutlineReading, MarkersDefocusedBeyondTheBlursSoughtFailTheContrastCheck) {
   DetectorParams params;
   int dark_rings = 0;
   for (int trial = 0; trial < 20; ++trial) {
-    const TagId id = random_id(Family(5), rng);
-    const Far far = defocused_marker(id, 10.5, 0.05, 0.9, rng, 20, Family(5));
-    const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.5, rng), Family(5));
+    const auto [id, far, reading] = read_defocused(Family(5), 10.5, 0.05, 0.9, 20, trial, rng);
     if (!reading) continue;
-    if (acceptable(*reading, params)) EXPECT_EQ(reading->id, id) << "trial " << trial;
+    if (acceptable(*reading, params)) {
+      EXPECT_EQ(reading->id, id) << "trial " << trial;
+    }
     if (reading->contrast > 0) continue;
     ++dark_rings;
     EXPECT_EQ(outline_stage(*reading, params), Stage::contrast) << "trial " << trial;
@@ -312,10 +323,7 @@ TEST(OutlineReading, DimDefocusedMarkersAreNeverMisread) {
   for (const double paper : {0.4, 0.42, 0.45})
     for (const double distance : {9.5, 10.0, 10.5})
     for (int trial = 0; trial < 5; ++trial) {
-      const TagId id = random_id(Family(4), rng);
-      const Far far = defocused_marker(id, distance, 0.3, paper, rng);
-      const auto reading =
-          read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.5, rng), Family(4));
+      const auto [id, far, reading] = read_defocused(Family(4), distance, 0.3, paper, 20, trial, rng);
       if (!reading || !acceptable(*reading, params)) continue;
       ++accepted;
       EXPECT_EQ(reading->id, id) << "paper " << paper << ", " << distance << " m, trial " << trial;
