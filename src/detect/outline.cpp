@@ -228,13 +228,17 @@ cv::Mat1f blurred_template(const cv::Mat1f& sharp, double sigma, bool paper_beyo
   return out;
 }
 
+// The larger eigenvalue of a symmetric 2 x 2 matrix.
+double larger_eigenvalue(const cv::Matx22d& m) {
+  return (m(0, 0) + m(1, 1)) / 2 + std::hypot((m(0, 0) - m(1, 1)) / 2, m(0, 1));
+}
+
 // A template blurred by a Gaussian of `covariance` (template pixels squared), the paper
 // beyond its white ring staying white: a defocus blurs the frame evenly, which on a tilted
 // marker is a blur of its template longer across the tilt's axis than along it.
 cv::Mat1f blurred_template(const cv::Mat1f& sharp, const cv::Matx22d& covariance) {
   const cv::Matx22d inverse = covariance.inv();
-  const double widest = std::sqrt(0.5 * (covariance(0, 0) + covariance(1, 1)) +
-                                  std::hypot(0.5 * (covariance(0, 0) - covariance(1, 1)), covariance(0, 1)));
+  const double widest = std::sqrt(larger_eigenvalue(covariance));
   // A kernel wider than the template adds nothing (and a near-singular warp would ask for
   // one of billions of taps).
   const int half = int(std::clamp(std::ceil(3 * widest), 1.0, double(std::max(sharp.rows, sharp.cols))));
@@ -785,16 +789,21 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
   };
   std::vector<std::pair<double, std::vector<cv::Point>>> hulls, rings;  // area, hull
   std::vector<cv::Point> points;
-  // Whether piece j is closed around a hole that holds two or more pieces, or one piece
-  // and is a tenth of its hull or more: a marker's border around its squares, some of
-  // which may have joined it.
-  const auto closed_around_pieces = [&](int j, double hull_area) {
+  // The convex hull of piece j, with its area, when it is closed around a hole that holds
+  // two or more pieces, or one piece and is a tenth of its hull or more: a marker's border
+  // around its squares, some of which may have joined it. Empty otherwise (the hull is
+  // taken only once a hole holds a piece: most pieces with holes in photos hold none).
+  const auto closed_hull = [&](int j) -> std::pair<double, std::vector<cv::Point>> {
+    std::vector<cv::Point> hull;
+    double area = 0;
     for (int hole = hierarchy[j][2]; hole >= 0; hole = hierarchy[hole][0]) {
       int held = 0;
       for (int k = hierarchy[hole][2]; k >= 0 && held < 2; k = hierarchy[k][0]) ++held;
-      if (held >= 2 || (held == 1 && cv::contourArea(contours[hole]) >= 0.1 * hull_area)) return true;
+      if (held == 0) continue;
+      if (hull.empty()) cv::convexHull(contours[j], hull), area = cv::contourArea(hull);
+      if (held >= 2 || cv::contourArea(contours[hole]) >= 0.1 * area) return {area, std::move(hull)};
     }
-    return false;
+    return {};
   };
   for (int i = 0; i < int(contours.size()); ++i) {
     // Outer boundaries of black pieces are at even depths; visit each parent's group once.
@@ -813,13 +822,8 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     // ground seen through the local threshold, open where the sheet meets the patch's
     // bright surroundings) would otherwise be its group and hide it.
     if (pieces.size() > 1)
-      for (const int j : pieces) {
-        if (hierarchy[j][2] < 0) continue;
-        std::vector<cv::Point> hull;
-        cv::convexHull(contours[j], hull);
-        const double area = cv::contourArea(hull);
-        if (closed_around_pieces(j, area)) rings.emplace_back(area, std::move(hull));
-      }
+      for (const int j : pieces)
+        if (auto ring = closed_hull(j); !ring.second.empty()) rings.push_back(std::move(ring));
     // The group grown from its largest piece by the pieces within a tenth of the group's
     // size: a speck of the margin or of the ground further off would pull a corner of the
     // hull out. Only specks are left out (at most a tenth of the group by the area of
@@ -1087,8 +1091,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   const auto uneven_defocus = [&](const cv::Mat& warp_to_crop, double units) -> std::optional<cv::Matx22d> {
     const cv::Matx22d jacobian = jacobian_at_centre(warp_to_crop);
     const cv::Matx22d shape = (jacobian.t() * jacobian).inv() * std::abs(cv::determinant(jacobian));
-    const double half_trace = (shape(0, 0) + shape(1, 1)) / 2;
-    const double stretch = std::sqrt(half_trace + std::sqrt(std::max(0.0, half_trace * half_trace - 1)));
+    const double stretch = std::sqrt(larger_eigenvalue(shape));
     if (!std::isfinite(stretch) || stretch < kMinDefocusStretch || stretch > kMaxDefocusStretch) return std::nullopt;
     return cv::Matx22d::eye() * (template_blur(per_unit) * template_blur(per_unit)) +
            shape * std::pow(units * kTemplateScale, 2);
