@@ -245,6 +245,7 @@ struct State {
   lftag::gst::DetectMessages messages;
   guint64 analysed = 0, skipped = 0; /* frames, for QoS messages */
   bool warned_budget = false;        /* the first frame the budget cut */
+  bool warned_layout = false;        /* the first frame whose planes lie outside its memory */
 };
 
 /* Downstream's latest QoS report: frames due before `earliest` (running time) are
@@ -703,6 +704,7 @@ static gboolean gst_lftag_detect_start(GstBaseTransform* trans) {
                                      {&s.families_error, &s.distortion_error, &s.cx_error, &s.cy_error}))
     return FALSE;
   st.warned_budget = false;
+  st.warned_layout = false;
   if (s.calibration_file.empty()) return TRUE;
 
   if (!lftag::gst::load_calibration(GST_ELEMENT(self), s.calibration_file, st.calibration)) return FALSE;
@@ -777,6 +779,43 @@ static gboolean gst_lftag_detect_update_detector(GstLFTagDetect* self, const Set
     st.rejected = s.detector;
   }
   return TRUE;
+}
+
+/* Whether every plane of a mapped frame lies inside the memory mapped for it. A
+ * GstVideoMeta (from appsrc, a camera driver or another element) states its own
+ * offsets and strides, and gst_video_frame_map() trusts them: a stride larger than the
+ * buffer would make the detector read, and the overlay write, past its end. Explains
+ * the first plane that does not fit in `why`. */
+static bool gst_lftag_detect_planes_fit(const GstVideoFrame* frame, std::string& why) {
+  const GstVideoFormatInfo* finfo = frame->info.finfo;
+  for (guint p = 0; p < GST_VIDEO_FRAME_N_PLANES(frame); ++p) {
+    /* With a video meta each plane is mapped on its own; without one the buffer is
+     * mapped whole into map[0] (and gst_video_frame_map checked its size). */
+    const GstMapInfo& map = frame->map[frame->meta ? p : 0];
+    const auto* data = static_cast<const guint8*>(frame->data[p]);
+    const gint stride = GST_VIDEO_FRAME_PLANE_STRIDE(frame, p);
+    /* The bytes one row of the plane spans, and how many rows it has. */
+    guint64 row = 0, rows = 0;
+    for (guint c = 0; c < GST_VIDEO_FORMAT_INFO_N_COMPONENTS(finfo); ++c) {
+      if (GST_VIDEO_FORMAT_INFO_PLANE(finfo, c) != p) continue;
+      const guint64 width = GST_VIDEO_FRAME_COMP_WIDTH(frame, c);
+      const guint64 sample = (GST_VIDEO_FORMAT_INFO_DEPTH(finfo, c) + GST_VIDEO_FORMAT_INFO_SHIFT(finfo, c) + 7) / 8;
+      if (width > 0)
+        row = std::max(row, guint64(GST_VIDEO_FORMAT_INFO_POFFSET(finfo, c)) +
+                                (width - 1) * guint64(GST_VIDEO_FORMAT_INFO_PSTRIDE(finfo, c)) + sample);
+      rows = std::max(rows, guint64(GST_VIDEO_FRAME_COMP_HEIGHT(frame, c)));
+    }
+    if (rows == 0) continue;
+    const guint8* end = map.data + map.size;
+    const bool inside = data >= map.data && data <= end;
+    if (stride < 0 || guint64(stride) < row || !inside || (rows - 1) * guint64(stride) + row > guint64(end - data)) {
+      why = "plane " + std::to_string(p) + " (stride " + std::to_string(stride) + ", " + std::to_string(rows) +
+            " rows of " + std::to_string(row) + " bytes) needs more than the " +
+            std::to_string(inside ? guint64(end - data) : 0) + " bytes mapped for it";
+      return false;
+    }
+  }
+  return true;
 }
 
 /* The frame's luma as 8-bit grey: plane 0 itself, or computed from RGB. */
@@ -943,6 +982,21 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
   GstVideoFrame frame;
   if (!gst_video_frame_map(&frame, info, buffer, GST_MAP_READ)) {
     GST_WARNING_OBJECT(self, "cannot map %" GST_PTR_FORMAT ", passed on unanalysed", buffer);
+    lftag::gst::attach_unanalysed(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info));
+    return GST_FLOW_OK;
+  }
+  std::string why;
+  if (!gst_lftag_detect_planes_fit(&frame, why)) {
+    gst_video_frame_unmap(&frame);
+    if (!st.warned_layout) {
+      GST_ELEMENT_WARNING(self, STREAM, FORMAT,
+                          ("A frame's video meta describes planes larger than its memory: %s. Such frames are "
+                           "passed on unanalysed; this is reported once per stream.",
+                           why.c_str()),
+                          ("%" GST_PTR_FORMAT, buffer));
+      st.warned_layout = true;
+    }
+    GST_WARNING_OBJECT(self, "%" GST_PTR_FORMAT " passed on unanalysed: %s", buffer, why.c_str());
     lftag::gst::attach_unanalysed(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info));
     return GST_FLOW_OK;
   }

@@ -1374,6 +1374,68 @@ GST_START_TEST(test_bad_frame_passes) {
 }
 GST_END_TEST;
 
+// A buffer whose GstVideoMeta claims planes larger than its memory (appsrc can send
+// one) passes on unanalysed, never read past its end, and the stream is warned once.
+GST_START_TEST(test_video_meta_larger_than_buffer) {
+  for (const char* format : {"GRAY8", "NV12", "RGB"}) {
+    Frames frames;
+    pull_frames(frames, "lftagtestsrc num-buffers=1 count=1",
+                (std::string("video/x-raw,width=640,height=480,format=") + format).c_str(), 1);
+    GstHarness* h = detector("overlay=outline+id", frames.info);
+    GstBus* bus = gst_bus_new();
+    gst_element_set_bus(h->element, bus);
+    const GstVideoInfo& info = frames.info;
+    const int last = GST_VIDEO_INFO_N_PLANES(&info) - 1;
+    // Each plane in turn lies: the last with an offset's worth of slack, the first with
+    // a stride that walks a gigabyte past the buffer, and a negative stride.
+    struct Lie {
+      int plane;
+      gint stride;
+    };
+    for (const Lie lie : {Lie{0, 1 << 21}, Lie{last, GST_VIDEO_INFO_PLANE_STRIDE(&info, last) + 64},
+                          Lie{0, -GST_VIDEO_INFO_PLANE_STRIDE(&info, 0)}}) {
+      gint stride[GST_VIDEO_MAX_PLANES];
+      gsize offset[GST_VIDEO_MAX_PLANES];
+      for (int p = 0; p < GST_VIDEO_MAX_PLANES; ++p) stride[p] = info.stride[p], offset[p] = info.offset[p];
+      stride[lie.plane] = lie.stride;
+      GstBuffer* buffer = gst_buffer_copy_deep(frames.buffers[0]);
+      gst_buffer_add_video_meta_full(buffer, GST_VIDEO_FRAME_FLAG_NONE, GST_VIDEO_INFO_FORMAT(&info),
+                                     GST_VIDEO_INFO_WIDTH(&info), GST_VIDEO_INFO_HEIGHT(&info),
+                                     GST_VIDEO_INFO_N_PLANES(&info), offset, stride);
+      GstBuffer* out = gst_harness_push_and_pull(h, buffer);
+      fail_unless(out != nullptr);
+      fail_if(detections_of(out).analysed, "%s: plane %d with stride %d was analysed", format, lie.plane, lie.stride);
+      gst_buffer_unref(out);
+    }
+    // The same frame with its true layout in a meta is analysed.
+    GstBuffer* buffer = gst_buffer_copy_deep(frames.buffers[0]);
+    gst_buffer_add_video_meta_full(buffer, GST_VIDEO_FRAME_FLAG_NONE, GST_VIDEO_INFO_FORMAT(&info),
+                                   GST_VIDEO_INFO_WIDTH(&info), GST_VIDEO_INFO_HEIGHT(&info),
+                                   GST_VIDEO_INFO_N_PLANES(&info), const_cast<gsize*>(info.offset),
+                                   const_cast<gint*>(info.stride));
+    GstBuffer* out = gst_harness_push_and_pull(h, buffer);
+    fail_unless(detections_of(out).analysed);
+    fail_unless_equals_int(detections_of(out).detections.size(), 1);
+    gst_buffer_unref(out);
+
+    int warnings = 0;
+    while (GstMessage* m = gst_bus_pop_filtered(bus, GST_MESSAGE_WARNING)) {
+      GError* error = nullptr;
+      gst_message_parse_warning(m, &error, nullptr);
+      fail_unless(std::string(error->message).find("larger than its memory") != std::string::npos, "%s",
+                  error->message);
+      g_error_free(error);
+      gst_message_unref(m);
+      ++warnings;
+    }
+    fail_unless_equals_int(warnings, 1);
+    gst_element_set_bus(h->element, nullptr);
+    gst_object_unref(bus);
+    gst_harness_teardown(h);
+  }
+}
+GST_END_TEST;
+
 // Under QoS no frame is dropped: by default a late frame is analysed like any other;
 // with late-frames=skip it passes on unanalysed, its meta and a QoS message say so.
 GST_START_TEST(test_late_frames) {
@@ -1591,6 +1653,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_budget_warning);
   tcase_add_test(tc, test_outline_bound_warning);
   tcase_add_test(tc, test_bad_frame_passes);
+  tcase_add_test(tc, test_video_meta_larger_than_buffer);
   tcase_add_test(tc, test_late_frames);
   tcase_add_test(tc, test_late_frames_in_a_live_pipeline);
   return s;
