@@ -42,7 +42,7 @@ EXPECTED = {
     "video_clips.csv": (["clip", "video", "defocus_sigma_px", "noise_sigma", "light_gradient"], False),
     "video_counters.csv": (["system", "counter", "value"], False),
     "adversarial.csv": (["config", "variant", "median_ms", "ratio", "candidates", "skipped_by_budget", "found",
-                         "all_found"], False),
+                         "all_found", "mean_ms", "p99_ms", "max_ms", "past_deadline", "skipped_by_deadline"], False),
 }
 PLOTS = ["range_vs_dictionary.png", "range_rate.png", "blur_polar.png", "pose_error.png", "speed.png",
          "video_recall.png"]

@@ -131,6 +131,7 @@ enum {
   PROP_MAX_CELL_RESIDUAL,
   PROP_LATE_FRAMES,
   PROP_MAX_CANDIDATES,
+  PROP_DEADLINE,
 };
 
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
@@ -194,10 +195,11 @@ struct DetectorSettings {
   bool second_look = true;
   double max_ink_ratio = 0, min_spread_ratio = 0, max_decode_error = 0, max_cell_residual = 0;
   int max_candidates = 0;
+  double deadline_ms = lftag::kLiveDeadlineMs;
 
   auto tie() const {
     return std::tie(families, tag_size, fx, fy, cx, cy, distortion, threshold_window, threshold_offset, second_look,
-                    max_ink_ratio, min_spread_ratio, max_decode_error, max_cell_residual, max_candidates);
+                    max_ink_ratio, min_spread_ratio, max_decode_error, max_cell_residual, max_candidates, deadline_ms);
   }
   bool operator==(const DetectorSettings& o) const { return tie() == o.tie(); }
   bool operator!=(const DetectorSettings& o) const { return !(*this == o); }
@@ -246,6 +248,7 @@ struct State {
   guint64 analysed = 0, skipped = 0; /* frames, for QoS messages */
   bool warned_budget = false;        /* the first frame the budget cut */
   bool warned_layout = false;        /* the first frame whose planes lie outside its memory */
+  bool warned_deadline = false;      /* the first frame the deadline cut */
 };
 
 /* Downstream's latest QoS report: frames due before `earliest` (running time) are
@@ -292,6 +295,7 @@ lftag::DetectorParams detector_params(const DetectorSettings& s, const Camera& c
   p.min_spread_ratio = s.min_spread_ratio;
   p.max_cell_residual = s.max_cell_residual;
   p.max_candidates = s.max_candidates;
+  p.deadline_ms = s.deadline_ms;
   if (s.max_decode_error > 0) p.max_decode_error.fill(s.max_decode_error);
   return p;
 }
@@ -496,6 +500,16 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                        "tiled wall, a perforated sheet) cannot stall the stream. The first "
                        "frame cut posts a warning. 0: no limit",
                        0, G_MAXINT, defaults.max_candidates, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_DEADLINE,
+      g_param_spec_double(
+          "deadline", "Deadline per frame (ms)",
+          "Milliseconds of processor time a frame's detection may take: once they are spent, the rest of "
+          "its work (candidates not yet decoded, second looks, outline reads) is skipped, "
+          "the most plausible candidates having gone first, so that no frame of "
+          "look-alikes or sensor noise stalls a live stream. The first frame cut posts a "
+          "warning. 0: no deadline (every frame gets all its work, as in lftag::Detector)",
+          0, 1e7, lftag::kLiveDeadlineMs, playing));
 
   gst_element_class_set_static_metadata(element_class, "LFTag detector", "Filter/Analyzer/Video",
                                         "Finds LFTag fiducial markers, decodes their ids and estimates their poses. "
@@ -642,6 +656,7 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
     case PROP_MAX_DECODE_ERROR: s.detector.max_decode_error = g_value_get_double(value); break;
     case PROP_MAX_CELL_RESIDUAL: s.detector.max_cell_residual = g_value_get_double(value); break;
     case PROP_MAX_CANDIDATES: s.detector.max_candidates = g_value_get_int(value); break;
+    case PROP_DEADLINE: s.detector.deadline_ms = g_value_get_double(value); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
   GST_OBJECT_UNLOCK(self);
@@ -674,6 +689,7 @@ static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue
     case PROP_MAX_DECODE_ERROR: g_value_set_double(value, s.detector.max_decode_error); break;
     case PROP_MAX_CELL_RESIDUAL: g_value_set_double(value, s.detector.max_cell_residual); break;
     case PROP_MAX_CANDIDATES: g_value_set_int(value, s.detector.max_candidates); break;
+    case PROP_DEADLINE: g_value_set_double(value, s.detector.deadline_ms); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
   GST_OBJECT_UNLOCK(self);
@@ -705,6 +721,7 @@ static gboolean gst_lftag_detect_start(GstBaseTransform* trans) {
     return FALSE;
   st.warned_budget = false;
   st.warned_layout = false;
+  st.warned_deadline = false;
   if (s.calibration_file.empty()) return TRUE;
 
   if (!lftag::gst::load_calibration(GST_ELEMENT(self), s.calibration_file, st.calibration)) return FALSE;
@@ -1026,6 +1043,16 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
                          stats.second_looks_skipped, stats.outline_reads_skipped),
                         (nullptr));
     st.warned_budget = true;
+  }
+  if (stats.past_deadline > 0 && !st.warned_deadline) {
+    GST_ELEMENT_WARNING(
+        self, STREAM, FAILED,
+        ("The frame at %" GST_TIME_FORMAT " took longer than its deadline (deadline=%g ms): %" G_GINT64_FORMAT
+         " candidates, second looks and outline reads were skipped, the most plausible candidates "
+         "examined first. Markers may be missed in such frames; this is reported once per stream.",
+         GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), s.detector.deadline_ms, stats.skipped_by_deadline),
+        (nullptr));
+    st.warned_deadline = true;
   }
 
   lftag::gst::attach_detections(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections);

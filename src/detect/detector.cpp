@@ -4,6 +4,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include <time.h>
+
 #include <opencv2/imgproc.hpp>
 
 #include "../core/geometry.hpp"
@@ -50,6 +52,7 @@ void DetectorParams::validate() const {
   if (!(max_child_ratio >= 1)) fail("the maximum child ratio must be at least 1");
   if (max_second_looks < 0) fail("the number of second looks must not be negative");
   if (max_candidates < 0) fail("the candidate budget must not be negative (0: no limit)");
+  if (!(deadline_ms >= 0 && deadline_ms <= 1e7)) fail("the deadline must be 0 (none) to 10,000,000 ms");
   if (max_extra_children < 0 || max_extra_children > 64) fail("extra children must be 0 to 64");
   if (dilation < 0 || dilation > 8) fail("dilation must be 0 to 8 pixels");
   if (!(max_ink_ratio >= 1)) fail("the ink ratio (tau1) must be at least 1");
@@ -75,10 +78,17 @@ DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   decoded += o.decoded, second_looks += o.second_looks, second_look_found += o.second_look_found;
   outline_reads += o.outline_reads, outline_found += o.outline_found, outline_reads_skipped += o.outline_reads_skipped;
   skipped_by_budget += o.skipped_by_budget, second_looks_skipped += o.second_looks_skipped;
+  past_deadline += o.past_deadline, skipped_by_deadline += o.skipped_by_deadline;
   second_look_ms += o.second_look_ms;
   threshold_ms += o.threshold_ms, regions_ms += o.regions_ms, candidates_ms += o.candidates_ms;
   keypoints_ms += o.keypoints_ms, hypotheses_ms += o.hypotheses_ms, decode_ms += o.decode_ms, pose_ms += o.pose_ms;
   return *this;
+}
+
+double detail::Deadline::thread_time() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return double(t.tv_sec) * 1e3 + double(t.tv_nsec) * 1e-6;
 }
 
 namespace {
@@ -100,12 +110,20 @@ bool already_found(const std::vector<Detection>& found, cv::Point2d q) {
   });
 }
 
-// Key points, decoding and pose of every candidate; detections are appended to `found`,
-// except where a detection already stands (a second look can overlap one).
+// Key points, decoding and pose of every candidate, most plausible first, until the
+// deadline; detections are appended to `found`, except where a detection already stands
+// (a second look can overlap one).
 void decode_candidates(const std::vector<detail::Candidate>& candidates, const ImageView& work, const Camera& camera,
-                       const DetectorParams& p, bool second_look, DetectionStats& stats, DetectionTrace* trace,
-                       std::vector<Detection>& found) {
-  for (const detail::Candidate& c : candidates) {
+                       const DetectorParams& p, bool second_look, const detail::Deadline& deadline,
+                       DetectionStats& stats, DetectionTrace* trace, std::vector<Detection>& found) {
+  for (std::size_t i = 0; i < candidates.size(); ++i) {
+    const detail::Candidate& c = candidates[i];
+    if (deadline.passed()) {
+      stats.skipped_by_deadline += std::int64_t(candidates.size() - i);
+      if (trace)
+        for (; i < candidates.size(); ++i) trace->verdicts.push_back(verdict_of(candidates[i], second_look, Stage::deadline));
+      return;
+    }
     if (trace) {
       std::vector<cv::Point2d> centroids;
       for (const detail::Blob& b : c.blobs) centroids.push_back(b.centroid);
@@ -209,8 +227,8 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
 // from the squares' centres under the aligned outline like any other detection.
 // `reads_left`: the frame's remaining outline reads (detail::kMaxOutlineReads a frame).
 void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& frame, const ImageView& work,
-                   const Camera& camera, const DetectorParams& p, DetectionStats& stats, std::vector<Detection>& found,
-                   int& reads_left, DetectionTrace* trace) {
+                   const Camera& camera, const DetectorParams& p, const detail::Deadline& deadline,
+                   DetectionStats& stats, std::vector<Detection>& found, int& reads_left, DetectionTrace* trace) {
   for (const std::array<cv::Point2d, 4>& outline : detail::coarse_outlines(binary, frame))
     for (const Family& f : p.families) {
       OutlineVerdict* verdict = nullptr;
@@ -223,11 +241,17 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
         if (verdict) verdict->stage = Stage::budget;
         continue;
       }
+      if (deadline.passed()) {
+        ++stats.skipped_by_deadline;
+        if (verdict) verdict->stage = Stage::deadline;
+        continue;
+      }
       --reads_left;
       ++stats.outline_reads;
       const std::optional<detail::OutlineReading> reading =
-          detail::read_outline(work, outline, f, p.min_pixels_per_unit);
+          detail::read_outline(work, outline, f, p.min_pixels_per_unit, deadline);
       const Stage stage = reading ? detail::outline_stage(*reading, p) : Stage::alignment;
+      if (stage == Stage::deadline) ++stats.skipped_by_deadline;
       if (verdict) {
         verdict->stage = stage;
         if (reading) {
@@ -288,6 +312,7 @@ const char* stage_name(Stage stage) {
   switch (stage) {
     case Stage::area: return "area";
     case Stage::budget: return "budget";
+    case Stage::deadline: return "deadline";
     case Stage::geometry: return "geometry";
     case Stage::angle: return "angle";
     case Stage::collinearity: return "collinearity";
@@ -354,6 +379,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
                                                  std::to_string(image.height) + ")");
   const DetectorParams& p = s.params;
   auto start = Clock::now();
+  const detail::Deadline deadline(detail::Deadline::thread_time(), p.deadline_ms);
   const Camera& camera = s.camera_for(image.width, image.height);
   const ImageView& work = image;
   detail::threshold_mean(work, p.threshold_window, p.threshold_offset, s.mean, s.binary);
@@ -379,10 +405,11 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   stats.candidates_ms = elapsed_ms(start);
   record_rejected(false);
 
-  decode_candidates(s.candidates, work, camera, p, false, stats, trace, found);
+  decode_candidates(s.candidates, work, camera, p, false, deadline, stats, trace, found);
 
-  // The second look, around clusters that no detection covers.
-  if (p.second_look) {
+  // The second look, around clusters that no detection covers (not sought at all once the
+  // deadline has passed).
+  if (p.second_look && !deadline.passed()) {
     start = Clock::now();
     detail::SecondLook look;
     look.sought.reset();
@@ -402,6 +429,10 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
         stats.second_looks_skipped += std::int64_t(boxes.size() - i);
         break;
       }
+      if (deadline.passed()) {
+        stats.skipped_by_deadline += std::int64_t(boxes.size() - i);
+        break;
+      }
       const cv::Rect& box = boxes[i];
       start = Clock::now();
       ++stats.second_looks;
@@ -418,15 +449,17 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       if (trace) trace->second_looks.push_back(box);
       record_rejected(true);
       const std::size_t before = found.size();
-      decode_candidates(s.candidates, work, camera, p, true, stats, trace, found);
+      decode_candidates(s.candidates, work, camera, p, true, deadline, stats, trace, found);
       if (found.size() == before) {
         start = Clock::now();
-        read_outlines(s.patch_binary, s.patch.frame, work, camera, p, stats, found, outline_reads_left, trace);
+        read_outlines(s.patch_binary, s.patch.frame, work, camera, p, deadline, stats, found, outline_reads_left,
+                      trace);
         stats.second_look_ms += elapsed_ms(start);
       }
     }
   }
 
+  stats.past_deadline = deadline.passed() ? 1 : 0;
   if (trace) trace->detections = found;
   if (stats_out) *stats_out += stats;
   return found;

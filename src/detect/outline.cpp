@@ -887,7 +887,8 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
 }
 
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& coarse,
-                                           const Family& family, double min_pixels_per_unit) {
+                                           const Family& family, double min_pixels_per_unit,
+                                           const Deadline& deadline) {
   const int side = family.side();
   // The frame around the coarse outline, with room for the alignment to move and for an
   // outline of the data squares only.
@@ -1028,13 +1029,23 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     }
     const cv::Mat warp = warp_of(start);
     double best = start_correlation;
-    for (std::size_t i = 0; i < smeared.size() && best < min_start; ++i)
+    for (std::size_t i = 0; i < smeared.size() && best < min_start && !deadline.passed(); ++i)
       best = std::max(best, smeared[i].correlation(crop, warp));
-    if (best < min_start) {
+    if (best < min_start && !deadline.passed()) {
       OutlineReading out;
       out.correlation = best, out.pixels_per_unit = start_per_unit;
       return out;
     }
+  }
+  // Past the deadline no alignment (the costly part) starts, nor any reading of cells.
+  const auto cut = [&](OutlineReading out) {
+    out.past_deadline = true;
+    return out;
+  };
+  if (deadline.passed()) {
+    OutlineReading out;
+    out.correlation = start_correlation, out.pixels_per_unit = start_per_unit;
+    return cut(out);
   }
   if (per_unit > kTemplateScale) crop = reduced(cv::INTER_AREA);
   cv::Mat warp = warp_of(start);
@@ -1109,7 +1120,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       if (const double c = SparseTemplate(blurred, 3).correlation(crop, warp); c > best)
         best = c, best_sigma = blur, best_units = units, best_template = blurred, best_uneven = bool(covariance);
     }
-    if (best_template.empty()) return false;
+    if (best_template.empty() || deadline.passed()) return false;
     cv::Mat again = warp.clone();
     try {
       const double c =
@@ -1145,7 +1156,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
         for (const double du : {-0.75, 0.0, 0.75})
           if (da != 0 || du != 0) try_smear(angle + da, units + du);
     }
-    if (!try_defocus(best) && best_along != cv::Point2d()) {
+    if (!try_defocus(best) && best_along != cv::Point2d() && !deadline.passed()) {
       cv::Mat again = warp.clone();
       try {
         const double c = cv::findTransformECC(smeared(templ, template_kernel(warp, best_along)), crop, again,
@@ -1229,6 +1240,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   const auto margin_of = [&](const PixelModel::Reading& r) {
     return defocus > 0 && r.noise_margin < kMinNoiseMargin ? 0.0 : r.margin;
   };
+  if (deadline.passed()) return cut(out);
   const auto reading = read_id(h);
   if (!reading) return std::nullopt;
   out.read = true;
@@ -1242,6 +1254,10 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // the squares are in place: then the marker of the new reading is aligned in turn.
   cv::Matx33d current = h;
   for (int attempt = 0; attempt < 3; ++attempt) {
+    if (deadline.passed()) {
+      out.marker_correlation = 0;
+      return cut(out);
+    }
     cv::Mat1f whole = marker_template(family, out.id);
     const cv::Matx33d start = from_frame * current * to_template.inv();
     cv::Mat refined(3, 3, CV_32F);
@@ -1290,6 +1306,7 @@ Stage outline_stage(const OutlineReading& r, const DetectorParams& params) {
   // length is fitted.
   // Too small to read first (read_outline decides it first for a start far under the
   // bound), then in the order read_outline decides them.
+  if (r.past_deadline) return Stage::deadline;
   if (r.pixels_per_unit < params.min_pixels_per_unit) return Stage::resolution;
   if (r.correlation < kMinCorrelation) return Stage::structure;
   if (r.contrast < kMinContrast) return Stage::contrast;

@@ -40,6 +40,23 @@
 
 namespace lftag::detail {
 
+// When a frame's remaining work is to be skipped (DetectorParams::deadline_ms): `ms` of the
+// calling thread's processor time after `start` (thread_time()); never when
+// default-constructed.
+class Deadline {
+ public:
+  Deadline() = default;
+  Deadline(double start_ms, double ms) : set_(ms > 0), at_ms_(start_ms + ms) {}
+  bool passed() const { return set_ && thread_time() >= at_ms_; }
+  // The processor time the calling thread has used, in milliseconds: the work a frame
+  // has cost, whatever else the machine runs.
+  static double thread_time();
+
+ private:
+  bool set_ = false;
+  double at_ms_ = 0;
+};
+
 // ---------------------------------------------------------------- threshold.cpp
 // One bit per pixel, set for black, rows padded to whole 64-bit words (padding is white).
 struct BinaryImage {
@@ -237,15 +254,18 @@ struct OutlineReading {
   double pixels_per_unit = 0;    // along the most foreshortened direction, at the centre
   double smear = 0;              // length of the motion blur found, units (0: none)
   double defocus = 0;            // Gaussian blur found beyond the pixels', units (0: none)
+  bool past_deadline = false;    // cut short by the frame's deadline: not acceptable
 };
 
 // Aligns the fixed structure of `family` to the image from `outline` (its outer corners,
 // clockwise on screen, from any of them) and reads the id; none when the alignment fails.
 // A start well under `min_pixels_per_unit` is not aligned: the reading returned has only
-// its correlation and pixels per unit, which fail the checks.
+// its correlation and pixels per unit, which fail the checks. Each alignment starts only
+// while `deadline` has not passed; after it the reading returned is marked past_deadline.
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& outline,
                                            const Family& family,
-                                           double min_pixels_per_unit = DetectorParams{}.min_pixels_per_unit);
+                                           double min_pixels_per_unit = DetectorParams{}.min_pixels_per_unit,
+                                           const Deadline& deadline = {});
 
 // The checks an outline reading must pass to be a detection, each scale-free.
 constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it

@@ -330,6 +330,7 @@ void Annotator::build() {
   set(detect, "threshold-window", std::to_string(o_.window));
   set(detect, "threshold-offset", std::to_string(o_.offset));
   set(detect, "max-candidates", std::to_string(o_.max_candidates));
+  g_object_set(detect, "deadline", o_.deadline_ms, nullptr);
   if (!o_.calibration.empty()) g_object_set(detect, "calibration-file", o_.calibration.c_str(), nullptr);
   // Only the options given: the element's own "not set" (0 for fx and fy, -1 for cx and
   // cy) never stands for a value.

@@ -34,9 +34,10 @@ struct DetectorOptions {
   double tag_size = 0.1;
   int window = 16, offset = 4;
   int max_candidates = DetectorParams{}.max_candidates;
+  double deadline_ms = kLiveDeadlineMs;
 };
 // Adds --family, --fx, --fy, --cx, --cy, --calibration, --tag-size, --threshold-window,
-// --threshold-offset and --max-candidates to `cmd`, stored in `options` (which must outlive
+// --threshold-offset, --max-candidates and --deadline to `cmd`, stored in `options` (which must outlive
 // the parse).
 void add_detector_options(CLI::App* cmd, DetectorOptions& options);
 // Throws std::invalid_argument when --fy, --cx or --cy is given without --fx.

@@ -26,7 +26,8 @@ nlohmann::json stats_json(const DetectionStats& s) {
             {"second_look_found", s.second_look_found},
             {"outline_reads", s.outline_reads}, {"outline_found", s.outline_found},
             {"outline_reads_skipped", s.outline_reads_skipped}, {"skipped_by_budget", s.skipped_by_budget},
-            {"second_looks_skipped", s.second_looks_skipped}}},
+            {"second_looks_skipped", s.second_looks_skipped}, {"past_deadline", s.past_deadline},
+            {"skipped_by_deadline", s.skipped_by_deadline}}},
           {"time_ms",
            {{"threshold", s.threshold_ms}, {"regions", s.regions_ms}, {"candidates", s.candidates_ms},
             {"keypoints", s.keypoints_ms}, {"hypotheses", s.hypotheses_ms}, {"decode", s.decode_ms},
@@ -90,6 +91,11 @@ void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
                   "counted (--stats: skipped_by_budget). 0: no limit (default " +
                       std::to_string(DetectorParams{}.max_candidates) + ")")
       ->check(CLI::Range(0, 1 << 30));
+  cmd->add_option("--deadline", o.deadline_ms,
+                  "Milliseconds of processor time an image may take: past them the rest of its work (candidates not yet decoded, "
+                  "second looks, outline reads) is skipped and counted (--stats: skipped_by_deadline). 0: none "
+                  "(default " + CLI::detail::to_string(kLiveDeadlineMs) + ")")
+      ->check(finite_in(0, 1e7));
 }
 
 void check_camera_options(const DetectorOptions& o) {
@@ -117,7 +123,7 @@ void add_detect_command(CLI::App& app, int& status) {
                 "per-stage times to each object");
   cmd->add_flag("--why", opt->why,
                 "Add \"candidates\": every topological candidate with the stage that stopped it (area, "
-                "budget, geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or "
+                "budget, deadline, geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or "
                 "\"detected\"");
   cmd->add_option("--debug-dir", opt->debug_dir,
                   "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
@@ -129,6 +135,7 @@ void add_detect_command(CLI::App& app, int& status) {
       base.threshold_window = opt->window;
       base.threshold_offset = opt->offset;
       base.max_candidates = opt->max_candidates;
+      base.deadline_ms = opt->deadline_ms;
       check_camera_options(*opt);
       if (!opt->calibration.empty()) base.camera = Camera::load(opt->calibration);
       if (!opt->debug_dir.empty()) std::filesystem::create_directories(opt->debug_dir);
@@ -195,7 +202,8 @@ void add_detect_command(CLI::App& app, int& status) {
                 << total.residual << " -> " << total.unambiguous << " -> " << total.decoded << ", mean "
                 << total.total_ms() / std::max<std::int64_t>(1, total.frames) << " ms per image; over budget: "
                 << total.skipped_by_budget << " candidates and " << total.second_looks_skipped
-                << " second looks skipped\n";
+                << " second looks skipped; past the deadline: " << total.past_deadline << " images, "
+                << total.skipped_by_deadline << " steps skipped\n";
     if (failed) std::cerr << "lftag detect: " << failed << " of " << opt->images.size() << " images failed\n";
     status = failed ? 1 : 0;
   });

@@ -1308,6 +1308,37 @@ GST_START_TEST(test_budget_warning) {
 }
 GST_END_TEST;
 
+// The per-frame deadline: the live default, a warning the first time it cuts a frame,
+// and frames cut by it still analysed (what was examined before it stands).
+GST_START_TEST(test_deadline_warning) {
+  GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
+  gdouble deadline = 0;
+  g_object_get(e, "deadline", &deadline, nullptr);
+  fail_unless_equals_float(deadline, lftag::kLiveDeadlineMs);
+  gst_object_unref(e);
+
+  auto warnings = [](const std::string& properties) {
+    std::vector<GstMessage*> messages = run_to_eos(
+        "lftagtestsrc count=3 num-buffers=10 ! lftagdetect " + properties + " ! fakesink", GST_MESSAGE_WARNING);
+    for (GstMessage* m : messages) {
+      GError* error = nullptr;
+      gst_message_parse_warning(m, &error, nullptr);
+      fail_unless(std::string(error->message).find("deadline=0.001 ms") != std::string::npos, "%s", error->message);
+      g_error_free(error);
+    }
+    return count_and_free(messages);
+  };
+  // A microsecond cuts every frame, and warns once; without a deadline nothing does.
+  fail_unless_equals_int(warnings("deadline=0.001"), 1);
+  fail_unless_equals_int(warnings("deadline=0"), 0);
+
+  Frames frames;
+  pull_frames(frames, "lftagtestsrc count=3 num-buffers=1 ! lftagdetect deadline=0.001", nullptr, 1);
+  fail_unless(detections_of(frames.buffers[0]).analysed);
+  fail_unless_equals_int(detections_of(frames.buffers[0]).detections.size(), 0);
+}
+GST_END_TEST;
+
 // The outline reads' bound: a wall of black tiles holding white dots makes no candidate,
 // but with every family each tile's outline would be read seven times; the frame stops
 // at 32 reads and the stream is warned once.
@@ -1324,7 +1355,8 @@ GST_START_TEST(test_outline_bound_warning) {
   GstVideoInfo info;
   gst_video_info_set_format(&info, GST_VIDEO_FORMAT_GRAY8, wall.cols, wall.rows);
   const auto warnings = [&](const std::string& families) {
-    GstHarness* h = detector("families=" + families, info);
+    // Without the deadline, which would cut such a frame first.
+    GstHarness* h = detector("deadline=0 families=" + families, info);
     GstBus* bus = gst_bus_new();
     gst_element_set_bus(h->element, bus);
     for (int i = 0; i < 2; ++i) {
@@ -1651,6 +1683,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_uncalibrated_warning);
   tcase_add_test(tc, test_camera_not_set);
   tcase_add_test(tc, test_budget_warning);
+  tcase_add_test(tc, test_deadline_warning);
   tcase_add_test(tc, test_outline_bound_warning);
   tcase_add_test(tc, test_bad_frame_passes);
   tcase_add_test(tc, test_video_meta_larger_than_buffer);

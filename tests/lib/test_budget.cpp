@@ -2,6 +2,7 @@
 // The per-frame budget (DetectorParams::max_candidates) and the early rejections that keep
 // frames full of marker look-alikes cheap: grids of white tiles holding dark dots make
 // thousands of candidates. Counts only: no assertion on time.
+#include <cmath>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -230,5 +231,69 @@ TEST(Budget, ParameterIsValidated) {
   p.max_candidates = -1;
   EXPECT_THROW(Detector{p}, std::invalid_argument);
   p.max_candidates = 0;
+  EXPECT_NO_THROW(Detector{p});
+}
+
+TEST(Deadline, CutsTheRestOfAFrameAndNeverAddsADetection) {
+  // Markers of four families before a wall of nine-dot tiles (about 3,000 candidates, 128
+  // examined): without a deadline every marker is found.
+  const Frame frame = frame_with_markers({tiled_wall(3, 16)}, {3, 4, 6, 8}, 21);
+  Detector open(all_families());
+  DetectionStats open_stats;
+  const std::vector<Detection> all = open.detect(ImageView(frame.image), &open_stats);
+  ASSERT_EQ(found_of(all, frame.markers), 4);
+  EXPECT_EQ(open_stats.past_deadline, 0);
+  EXPECT_EQ(open_stats.skipped_by_deadline, 0);
+  const auto same_place = [](const Detection& a, const Detection& b) {
+    return a.family == b.family && a.id == b.id && cv::norm(a.center - b.center) < 1e-9;
+  };
+
+  // A deadline that has passed before the first candidate: every candidate examined
+  // without one is skipped, with its verdict, and nothing else runs.
+  DetectorParams params = all_families();
+  params.deadline_ms = 1e-3;
+  DetectionStats stats;
+  DetectionTrace trace;
+  const std::vector<Detection> none = Detector(params).detect(ImageView(frame.image), &stats, &trace);
+  EXPECT_TRUE(none.empty());
+  EXPECT_EQ(stats.past_deadline, 1);
+  EXPECT_EQ(stats.skipped_by_deadline, stats.topology - stats.skipped_by_budget);
+  EXPECT_EQ(stats.second_looks + stats.outline_reads, 0);
+  EXPECT_EQ(std::count_if(trace.verdicts.begin(), trace.verdicts.end(),
+                          [](const CandidateVerdict& v) { return v.stage == Stage::deadline; }),
+            stats.skipped_by_deadline);
+  EXPECT_STREQ(stage_name(Stage::deadline), "deadline");
+
+  // Cut anywhere (half the frame's time without a deadline), it finds only what the
+  // unbounded detection finds, where it finds it.
+  params.deadline_ms = open_stats.total_ms() / 2;
+  for (const Detection& d : Detector(params).detect(ImageView(frame.image)))
+    EXPECT_TRUE(std::any_of(all.begin(), all.end(), [&](const Detection& a) { return same_place(a, d); }))
+        << d.family.name() << " " << d.id.to_decimal();
+
+  // A deadline never reached changes nothing.
+  params.deadline_ms = 1e6;
+  DetectionStats late;
+  const std::vector<Detection> same = Detector(params).detect(ImageView(frame.image), &late);
+  ASSERT_EQ(same.size(), all.size());
+  for (std::size_t i = 0; i < all.size(); ++i) EXPECT_TRUE(same_place(same[i], all[i])) << i;
+  EXPECT_EQ(late.past_deadline, 0);
+  // Summed over frames like the other counters.
+  DetectionStats sum;
+  sum += stats;
+  sum += stats;
+  EXPECT_EQ(sum.past_deadline, 2);
+  EXPECT_EQ(sum.skipped_by_deadline, 2 * stats.skipped_by_deadline);
+}
+
+TEST(Deadline, ParameterIsValidated) {
+  DetectorParams p;
+  EXPECT_EQ(p.deadline_ms, 0);  // a library call does all its work
+  EXPECT_EQ(kLiveDeadlineMs, 25);
+  for (double bad : {-1.0, std::nan(""), HUGE_VAL, 1e8}) {
+    p.deadline_ms = bad;
+    EXPECT_THROW(Detector{p}, std::invalid_argument) << bad;
+  }
+  p.deadline_ms = kLiveDeadlineMs;
   EXPECT_NO_THROW(Detector{p});
 }

@@ -617,3 +617,27 @@ TEST(OutlineReading, SmallerFamiliesAreRefusedBeforeTheAlignmentFromOneAndAHalfP
   // reach this one (16 in the sanitizer build, whose compiler rounds differently).
   EXPECT_GE(at_the_gate, 8);
 }
+
+TEST(OutlineReading, StopsAtTheFramesDeadline) {
+  // 4x4 markers at 12 m (1.2 px per unit), read in full without a deadline; with one that
+  // has passed the reading stops before its alignment and says so, never with an id.
+  std::mt19937_64 rng(31);
+  DetectorParams params;
+  const Deadline passed(Deadline::thread_time() - 2, 1.0);
+  ASSERT_TRUE(passed.passed());
+  EXPECT_FALSE(Deadline().passed());
+  int read = 0;
+  for (int trial = 0; trial < 8; ++trial) {
+    const TagId id = random_id(Family(4), rng);
+    const Far far = far_marker(4, id, 12, 37 * trial);
+    const auto outline = coarse(far.corners, trial % 4, 0.3, rng);
+    const auto full = read_outline(ImageView(far.scene.image), outline, Family(4));
+    if (full && acceptable(*full, params) && full->id == id) ++read;
+    const auto cut = read_outline(ImageView(far.scene.image), outline, Family(4), params.min_pixels_per_unit, passed);
+    ASSERT_TRUE(cut.has_value()) << trial;
+    EXPECT_TRUE(cut->past_deadline) << trial;
+    EXPECT_FALSE(cut->read) << trial;
+    EXPECT_EQ(outline_stage(*cut, params), Stage::deadline) << trial;
+  }
+  EXPECT_GE(read, 6) << "the markers are no longer read without a deadline: the test shows nothing";
+}

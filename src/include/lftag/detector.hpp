@@ -81,6 +81,18 @@ struct DetectorParams {
   //    one a frame); a grid of dotted tiles makes thousands. 0: no limit.
   int max_candidates = 128;
 
+  // -- Per-frame deadline: milliseconds of the calling thread's processor time from the
+  //    start of detect(). Once they are spent, the frame's remaining work (candidates not
+  //    yet decoded, second looks, outline reads, and the rest of an outline read under
+  //    way) is skipped and counted (DetectionStats::skipped_by_deadline), the most
+  //    plausible candidates having gone first. It bounds what a frame of look-alikes or
+  //    sensor noise costs in milliseconds, where the counts above bound it only in work;
+  //    processor time rather than wall-clock time, so that other programs on the machine
+  //    do not cut a frame (a stream that falls behind is GStreamer's QoS's to handle).
+  //    0: none, so that a detection does all its work and gives the same result on any
+  //    machine; the GStreamer element and the command line default to kLiveDeadlineMs.
+  double deadline_ms = 0;
+
   // -- Candidates: a white region with at least n^2 black children. Children smaller than
   //    `min_child_fraction` of the white region's area, or than the largest child over
   //    `max_child_ratio`, are noise; at most n^2 + max_extra_children children remain, of
@@ -140,6 +152,11 @@ struct DetectorParams {
   void validate() const;
 };
 
+// The deadline of the element and the command line (DetectorParams::deadline_ms): a 720p
+// frame's fixed work (binarisation, labelling) takes 1 to 3 ms and the work under way when
+// the deadline passes at most a few more, so a frame stays within the 33 ms of 30 fps.
+constexpr double kLiveDeadlineMs = 25;
+
 // tau3 defaults: the paper's 5e-4 (3x3) and 1e-3 (4x4), and calibrated values for the others.
 double decode_threshold_default(const Family& family);
 
@@ -189,6 +206,8 @@ struct DetectionStats {
   std::int64_t outline_reads_skipped = 0;  // outline reads not made: the frame's bound (32) was reached
   std::int64_t skipped_by_budget = 0;  // candidates not decoded: DetectorParams::max_candidates was spent
   std::int64_t second_looks_skipped = 0;  // clusters not looked at again: max_second_looks or the budget
+  std::int64_t past_deadline = 0;         // frames whose deadline (DetectorParams::deadline_ms) cut their work
+  std::int64_t skipped_by_deadline = 0;   // candidates, second looks and outline reads it cut (one under way included)
   double threshold_ms = 0;             // binarisation
   double regions_ms = 0;               // topological connected components
   double candidates_ms = 0;            // topological filtering and vertex estimation
@@ -206,6 +225,7 @@ enum class Stage {
   area,          // the area constraint (tau1)
   budget,        // not examined: the frame's candidate budget (max_candidates) or its
                  // outline reads were spent
+  deadline,      // not examined, or an outline read cut short: the frame's deadline had passed
   geometry,      // the geometry constraint, on every side of the hull
   angle,         // the angle constraint
   collinearity,  // the collinearity constraint (tau2)
