@@ -21,7 +21,14 @@
  * writes no line (the element warns once per stream).
  *
  * A location that cannot be opened for writing fails the state change to PAUSED
- * with an error naming it; a failed write is an error too.
+ * with an error naming it. Each line goes to the kernel whole, in one write(2)
+ * (continued after a short write or a signal), with nothing buffered in the
+ * element. A write that fails (a full disk, a file size limit) is an error that
+ * says why and which frame's line is lost, and the file is cut back to its last
+ * whole line, so that it holds whole lines only; on the standard output, which
+ * lftagpublish does not truncate, the error says whether part of the line went
+ * out. After an error nothing more is written and the file is kept as it is
+ * (whole lines only); it is closed when the element stops.
  *
  * ## Example launch lines
  * |[
@@ -35,9 +42,13 @@
  */
 #include "gstlftagpublish.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <optional>
 #include <string>
 
 #include "lftagjson.h"
@@ -67,9 +78,13 @@ struct _GstLFTagPublish {
   gboolean append;
 
   /* Streaming state: opened in start(), closed in stop(). */
-  FILE* file;
-  gchar* opened; /* the location as opened, for messages */
+  int fd;             /* -1: none */
+  gboolean to_stdout; /* fd is the standard output: never closed or cut */
+  gchar* opened;      /* the location as opened, for messages */
   guint64 frame;
+  guint64 lines;     /* whole lines written since the start */
+  gboolean failed;   /* an error was posted: nothing more is written */
+  guint64 unwritten; /* buffers refused after the error */
   gboolean warned_no_meta;
 };
 
@@ -123,7 +138,8 @@ static void gst_lftag_publish_class_init(GstLFTagPublishClass* klass) {
 static void gst_lftag_publish_init(GstLFTagPublish* self) {
   self->location = nullptr;
   self->append = DEFAULT_PROP_APPEND;
-  self->file = nullptr;
+  self->fd = -1;
+  self->to_stdout = FALSE;
   self->opened = nullptr;
   /* Like identity: buffers pass untouched, transform_ip only looks at them. */
   gst_base_transform_set_passthrough(GST_BASE_TRANSFORM(self), TRUE);
@@ -174,17 +190,24 @@ static gboolean gst_lftag_publish_start(GstBaseTransform* trans) {
   GST_OBJECT_UNLOCK(self);
 
   self->frame = 0;
+  self->lines = 0;
+  self->failed = FALSE;
+  self->unwritten = 0;
   self->warned_no_meta = FALSE;
-  g_free(self->opened);
+  g_clear_pointer(&self->opened, g_free);
   if (location.empty() || location == "-") {
-    self->file = stdout;
+    /* The lines go to the descriptor, not through stdio: whatever the
+     * application printed before goes out first. */
+    fflush(stdout);
+    self->fd = STDOUT_FILENO;
+    self->to_stdout = TRUE;
     self->opened = g_strdup("the standard output");
     return TRUE;
   }
-  self->file = fopen(location.c_str(), append ? "a" : "w");
-  if (!self->file) {
+  self->to_stdout = FALSE;
+  self->fd = open(location.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC | (append ? O_APPEND : O_TRUNC), 0666);
+  if (self->fd < 0) {
     const int error = errno;
-    self->opened = nullptr;
     GST_ELEMENT_ERROR(self, RESOURCE, OPEN_WRITE,
                       ("Could not open \"%s\" for writing: %s.", location.c_str(), g_strerror(error)), (nullptr));
     return FALSE;
@@ -194,30 +217,90 @@ static gboolean gst_lftag_publish_start(GstBaseTransform* trans) {
   return TRUE;
 }
 
-/* Flushes what was written; FALSE (with an error posted) when it failed. */
-static gboolean gst_lftag_publish_flush(GstLFTagPublish* self) {
-  if (!self->file || fflush(self->file) == 0) return TRUE;
-  GST_ELEMENT_ERROR(self, RESOURCE, WRITE, ("Could not write to %s: %s.", self->opened, g_strerror(errno)), (nullptr));
+/* Hands `line` to the kernel whole: write(2) until all of it is written,
+ * through short writes and signals. On failure posts an error saying what
+ * failed and that the line of `frame` is lost, after cutting the file back to
+ * its last whole line (a file this element opened; the standard output is
+ * never cut). */
+static gboolean gst_lftag_publish_write_line(GstLFTagPublish* self, const std::string& line, guint64 frame) {
+  std::size_t done = 0;
+  int error = 0;
+  while (done < line.size()) {
+    const ssize_t n = write(self->fd, line.data() + done, line.size() - done);
+    if (n > 0) {
+      done += std::size_t(n);
+    } else if (n < 0 && errno == EINTR) {
+      continue;
+    } else {
+      error = n < 0 ? errno : EIO;
+      break;
+    }
+  }
+  if (done == line.size()) {
+    ++self->lines;
+    return TRUE;
+  }
+
+  /* The partial line ends at the descriptor's offset (the end of the file,
+   * appending or not): cutting `done` bytes before it leaves the last whole
+   * line at the end. */
+  std::string holds = self->to_stdout ? "nothing of it went out" : "the file holds whole lines only";
+  std::string cut;
+  if (done > 0 && self->to_stdout) {
+    holds = "the standard output ends with part of it";
+  } else if (done > 0) {
+    const off_t end = lseek(self->fd, 0, SEEK_CUR);
+    int cut_error = 0;
+    if (end < 0)
+      cut_error = errno;
+    else if (end < off_t(done))
+      cut_error = EINVAL;
+    else if (ftruncate(self->fd, end - off_t(done)) != 0)
+      cut_error = errno;
+    if (cut_error == 0) {
+      lseek(self->fd, end - off_t(done), SEEK_SET);
+      cut = "; cut back to " + std::to_string(end - off_t(done)) + " bytes";
+    } else {
+      holds = std::string("the file ends with part of it (cutting it off failed: ") + g_strerror(cut_error) + ")";
+    }
+  }
+  gchar* text = g_strdup_printf("Could not write to %s: %s. 1 frame lost (the line of frame %" G_GUINT64_FORMAT
+                                ") and no more written; %s.",
+                                self->opened, g_strerror(error), frame, holds.c_str());
+  gchar* debug = g_strdup_printf("%zu of the line's %zu bytes written after %" G_GUINT64_FORMAT " whole lines%s", done,
+                                 line.size(), self->lines, cut.c_str());
+  if (error == ENOSPC || error == EDQUOT)
+    GST_ELEMENT_ERROR(self, RESOURCE, NO_SPACE_LEFT, ("%s", text), ("%s", debug));
+  else
+    GST_ELEMENT_ERROR(self, RESOURCE, WRITE, ("%s", text), ("%s", debug));
+  g_free(text);
+  g_free(debug);
+  self->failed = TRUE;
   return FALSE;
 }
 
 static gboolean gst_lftag_publish_stop(GstBaseTransform* trans) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
-  gboolean ok = gst_lftag_publish_flush(self);
 
-  if (self->file && self->file != stdout && fclose(self->file) != 0 && ok) {
+  if (self->unwritten > 0)
+    GST_WARNING_OBJECT(self, "%" G_GUINT64_FORMAT " buffers came after the error and were not written",
+                       self->unwritten);
+  if (self->fd >= 0 && !self->to_stdout && close(self->fd) != 0) {
     GST_ELEMENT_ERROR(self, RESOURCE, CLOSE, ("Could not close %s: %s.", self->opened, g_strerror(errno)), (nullptr));
-    ok = FALSE;
   }
-  self->file = nullptr;
-  return ok;
+  self->fd = -1;
+  /* Stopping succeeds whatever happened to the file (the error is posted):
+   * the pipeline must be able to reach NULL. */
+  return TRUE;
 }
 
 static gboolean gst_lftag_publish_sink_event(GstBaseTransform* trans, GstEvent* event) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
 
-  /* Everything is on disk before EOS reaches the sink (and the application). */
-  if (GST_EVENT_TYPE(event) == GST_EVENT_EOS && !gst_lftag_publish_flush(self)) {
+  /* Every line is written as it comes, so at EOS everything is in the file;
+   * an EOS after an error goes no further, so that the application does not
+   * take the output for complete. */
+  if (GST_EVENT_TYPE(event) == GST_EVENT_EOS && self->failed) {
     gst_event_unref(event);
     return FALSE;
   }
@@ -228,6 +311,10 @@ static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, Gst
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
   const guint64 frame = self->frame++;
 
+  if (self->failed) {
+    ++self->unwritten;
+    return GST_FLOW_ERROR;
+  }
   std::optional<nlohmann::ordered_json> record;
   try {
     record = lftag::gst::buffer_json(buffer, trans->segment, frame);
@@ -247,13 +334,8 @@ static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, Gst
     return GST_FLOW_OK;
   }
 
-  const std::string line = record->dump() + "\n";
-  /* One line at a time, so that a reader of a pipe or of a growing file sees
-   * whole lines as the frames pass. */
-  if (fwrite(line.data(), 1, line.size(), self->file) != line.size() || fflush(self->file) != 0) {
-    GST_ELEMENT_ERROR(self, RESOURCE, WRITE, ("Could not write to %s: %s.", self->opened, g_strerror(errno)),
-                      (nullptr));
-    return GST_FLOW_ERROR;
-  }
+  /* One whole line at a time, nothing kept back, so that a reader of a pipe or
+   * of a growing file sees whole lines as the frames pass. */
+  if (!gst_lftag_publish_write_line(self, record->dump() + "\n", frame)) return GST_FLOW_ERROR;
   return GST_FLOW_OK;
 }

@@ -2,9 +2,13 @@
 // lftagpublish: one JSON line per buffer with an LFTagMeta, matching the meta (the same
 // JSON as `lftag detect`) and the buffer's timestamps; to a file or the standard output;
 // append; an unwritable location fails the start; which metas survive encoders, decoders
-// and muxers; a warning when there is no meta.
+// and muxers; a warning when there is no meta; a failed write leaves whole lines only and
+// says which frame is lost.
+#include <sys/resource.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <string>
@@ -146,6 +150,49 @@ void expect_lines_match(const std::vector<nlohmann::json>& lines, const Run& run
     fail_unless(line.at("detections") == expected, "frame %d: %s", int(i), line.at("detections").dump().c_str());
   }
 }
+
+// The file's bytes.
+std::string contents(const std::string& path) {
+  gchar* text = nullptr;
+  gsize size = 0;
+  if (!g_file_get_contents(path.c_str(), &text, &size, nullptr)) return "";
+  std::string out(text, size);
+  g_free(text);
+  return out;
+}
+
+// The file's lines, each with its '\n' (the last one without, if it has none).
+std::vector<std::string> raw_lines(const std::string& path) {
+  const std::string text = contents(path);
+  std::vector<std::string> lines;
+  for (std::size_t begin = 0; begin < text.size();) {
+    const std::size_t end = text.find('\n', begin);
+    const std::size_t next = end == std::string::npos ? text.size() : end + 1;
+    lines.push_back(text.substr(begin, next - begin));
+    begin = next;
+  }
+  return lines;
+}
+
+// An element error: its source, domain, code and message.
+struct Posted {
+  std::string source;
+  GQuark domain = 0;
+  int code = 0;
+  std::string message;
+};
+
+Posted parse_error(GstMessage* m) {
+  fail_unless(m != nullptr && GST_MESSAGE_TYPE(m) == GST_MESSAGE_ERROR, "no error posted");
+  GError* error = nullptr;
+  gst_message_parse_error(m, &error, nullptr);
+  Posted posted{GST_OBJECT_NAME(GST_MESSAGE_SRC(m)), error->domain, error->code, error->message};
+  g_error_free(error);
+  gst_message_unref(m);
+  return posted;
+}
+
+bool has(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 }  // namespace
 
@@ -291,6 +338,78 @@ GST_START_TEST(test_times_after_seek) {
 }
 GST_END_TEST;
 
+// A write that fails part way through a line (here at the process's file size limit, as
+// on a full disk) cuts the file back to its last whole line and posts an error saying
+// why and which frame's line is lost.
+GST_START_TEST(test_write_error_leaves_whole_lines) {
+  const ScratchDir scratch;
+  const std::string reference = scratch.path("reference.jsonl");
+  const std::string path = scratch.path("limited.jsonl");
+  const std::string launch = "lftagtestsrc num-buffers=8 ids=6789,42 ! lftagdetect ! lftagpublish name=p location=";
+  Run run;
+  run_pipeline(launch + reference + " ! fakesink name=sink", run);
+  const std::vector<std::string> lines = raw_lines(reference);
+  fail_unless_equals_int(lines.size(), 8);
+  // Room for three lines and half of the fourth.
+  const std::string three = lines[0] + lines[1] + lines[2];
+  const rlim_t limit = three.size() + lines[3].size() / 2;
+
+  GstElement* pipeline = gst_parse_launch((launch + path + " ! fakesink").c_str(), nullptr);
+  fail_unless(pipeline != nullptr);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  struct rlimit saved;
+  fail_unless(getrlimit(RLIMIT_FSIZE, &saved) == 0);
+  fail_unless(saved.rlim_max == RLIM_INFINITY || saved.rlim_max >= limit);
+  struct rlimit small = saved;
+  small.rlim_cur = limit;
+  // The limit holds for the whole process, check's own log file included: no check
+  // macro until it is lifted. Ignored SIGXFSZ makes the write past it fail with EFBIG.
+  void (*const handler)(int) = std::signal(SIGXFSZ, SIG_IGN);
+  const int limited = setrlimit(RLIMIT_FSIZE, &small);
+  const GstStateChangeReturn started = gst_element_set_state(pipeline, GST_STATE_PLAYING);
+  GstMessage* m = gst_bus_timed_pop_filtered(bus, GST_CLOCK_TIME_NONE,
+                                             GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR));
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  setrlimit(RLIMIT_FSIZE, &saved);
+  std::signal(SIGXFSZ, handler);
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+
+  fail_unless(limited == 0);
+  fail_unless(started != GST_STATE_CHANGE_FAILURE);
+  const Posted error = parse_error(m);
+  fail_unless_equals_string(error.source.c_str(), "p");
+  // The first three lines, whole, and nothing of the fourth.
+  const std::string written = contents(path);
+  fail_unless(written == three, "%zu bytes written, the three whole lines are %zu", written.size(), three.size());
+  fail_unless_equals_int(read_lines(path).size(), 3);
+  fail_unless(error.domain == GST_RESOURCE_ERROR && error.code == GST_RESOURCE_ERROR_WRITE, "%s",
+              error.message.c_str());
+  fail_unless(has(error.message, path) && has(error.message, g_strerror(EFBIG)), "%s", error.message.c_str());
+  fail_unless(has(error.message, "1 frame lost (the line of frame 3)"), "%s", error.message.c_str());
+}
+GST_END_TEST;
+
+// No space left: the error says so, with its own code, and which frame is lost.
+GST_START_TEST(test_no_space_left) {
+  GstElement* pipeline =
+      gst_parse_launch("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p location=/dev/full ! fakesink",
+                       nullptr);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+  const Posted error = parse_error(
+      gst_bus_timed_pop_filtered(bus, GST_CLOCK_TIME_NONE, GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR)));
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+  fail_unless_equals_string(error.source.c_str(), "p");
+  fail_unless(error.domain == GST_RESOURCE_ERROR && error.code == GST_RESOURCE_ERROR_NO_SPACE_LEFT, "%s",
+              error.message.c_str());
+  fail_unless(has(error.message, "/dev/full") && has(error.message, g_strerror(ENOSPC)), "%s", error.message.c_str());
+  fail_unless(has(error.message, "1 frame lost (the line of frame 0)"), "%s", error.message.c_str());
+}
+GST_END_TEST;
+
 static Suite* lftagpublish_suite(void) {
   Suite* s = suite_create("lftagpublish");
   TCase* tc = tcase_create("general");
@@ -301,6 +420,8 @@ static Suite* lftagpublish_suite(void) {
   tcase_add_test(tc, test_unwritable_location);
   tcase_add_test(tc, test_after_encode_and_decode);
   tcase_add_test(tc, test_times_after_seek);
+  tcase_add_test(tc, test_write_error_leaves_whole_lines);
+  tcase_add_test(tc, test_no_space_left);
   return s;
 }
 
