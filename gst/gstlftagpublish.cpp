@@ -27,8 +27,12 @@
  * says why and which frame's line is lost, and the file is cut back to its last
  * whole line, so that it holds whole lines only; on the standard output, which
  * lftagpublish does not truncate, the error says whether part of the line went
- * out. After an error nothing more is written and the file is kept as it is
- * (whole lines only); it is closed when the element stops.
+ * out. Before each line, at EOS and when stopping, the element checks that the
+ * file it writes is still the one at the location: deleted (or its directory
+ * removed), renamed away or replaced by another file is an error naming the
+ * location and how many frames' lines are not there. After an error nothing more
+ * is written and the file is kept as it is (whole lines only); it is closed when
+ * the element stops.
  *
  * ## Example launch lines
  * |[
@@ -43,6 +47,7 @@
 #include "gstlftagpublish.h"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -79,8 +84,11 @@ struct _GstLFTagPublish {
 
   /* Streaming state: opened in start(), closed in stop(). */
   int fd;             /* -1: none */
-  gboolean to_stdout; /* fd is the standard output: never closed or cut */
+  gboolean to_stdout; /* fd is the standard output: never closed, cut or checked */
+  gchar* path;        /* the file's absolute path, for the identity check; null for stdout */
   gchar* opened;      /* the location as opened, for messages */
+  dev_t dev;          /* the identity of the file opened */
+  ino_t ino;
   guint64 frame;
   guint64 lines;     /* whole lines written since the start */
   gboolean failed;   /* an error was posted: nothing more is written */
@@ -140,6 +148,7 @@ static void gst_lftag_publish_init(GstLFTagPublish* self) {
   self->append = DEFAULT_PROP_APPEND;
   self->fd = -1;
   self->to_stdout = FALSE;
+  self->path = nullptr;
   self->opened = nullptr;
   /* Like identity: buffers pass untouched, transform_ip only looks at them. */
   gst_base_transform_set_passthrough(GST_BASE_TRANSFORM(self), TRUE);
@@ -150,6 +159,7 @@ static void gst_lftag_publish_finalize(GObject* object) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(object);
 
   g_free(self->location);
+  g_free(self->path);
   g_free(self->opened);
   G_OBJECT_CLASS(parent_class)->finalize(object);
 }
@@ -194,6 +204,7 @@ static gboolean gst_lftag_publish_start(GstBaseTransform* trans) {
   self->failed = FALSE;
   self->unwritten = 0;
   self->warned_no_meta = FALSE;
+  g_clear_pointer(&self->path, g_free);
   g_clear_pointer(&self->opened, g_free);
   if (location.empty() || location == "-") {
     /* The lines go to the descriptor, not through stdio: whatever the
@@ -206,15 +217,85 @@ static gboolean gst_lftag_publish_start(GstBaseTransform* trans) {
   }
   self->to_stdout = FALSE;
   self->fd = open(location.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC | (append ? O_APPEND : O_TRUNC), 0666);
-  if (self->fd < 0) {
+  struct stat st;
+  if (self->fd < 0 || fstat(self->fd, &st) != 0) {
     const int error = errno;
+    if (self->fd >= 0) close(self->fd);
+    self->fd = -1;
     GST_ELEMENT_ERROR(self, RESOURCE, OPEN_WRITE,
                       ("Could not open \"%s\" for writing: %s.", location.c_str(), g_strerror(error)), (nullptr));
     return FALSE;
   }
+  self->dev = st.st_dev;
+  self->ino = st.st_ino;
+  /* Absolute, so that the check finds the same file if the process changes
+   * its working directory. */
+  if (g_path_is_absolute(location.c_str())) {
+    self->path = g_strdup(location.c_str());
+  } else {
+    gchar* here = g_get_current_dir();
+    self->path = g_build_filename(here, location.c_str(), nullptr);
+    g_free(here);
+  }
   self->opened = g_strdup_printf("\"%s\"", location.c_str());
-  GST_INFO_OBJECT(self, "writing to %s", self->opened);
+  GST_INFO_OBJECT(self, "writing to %s (%s)", self->opened, self->path);
   return TRUE;
+}
+
+/* "the line of 1 frame", "the lines of 12 frames". */
+static std::string frames_lines(guint64 n) {
+  return n == 1 ? "the line of 1 frame" : "the lines of " + std::to_string(n) + " frames";
+}
+
+/* Whether the file written is still the one at the location: not deleted (or its
+ * directory removed), renamed away or replaced. When it is not, posts an error
+ * naming the location and how many frames' lines are not there: the lines
+ * written, and `pending` more that were to be. An fstat and a stat, a few
+ * microseconds, once per line. */
+static gboolean gst_lftag_publish_check_file(GstLFTagPublish* self, guint64 pending) {
+  if (self->fd < 0 || self->to_stdout || self->failed) return TRUE;
+
+  struct stat open_st, path_st;
+  if (fstat(self->fd, &open_st) != 0) {
+    GST_WARNING_OBJECT(self, "cannot fstat %s: %s", self->opened, g_strerror(errno));
+    return TRUE;
+  }
+  const guint64 lost = self->lines + pending;
+  const std::string frames = frames_lines(lost);
+  const char* are = lost == 1 ? "is" : "are";
+  gchar* debug =
+      g_strdup_printf("%s: device %" G_GUINT64_FORMAT ", inode %" G_GUINT64_FORMAT ", %u links; %" G_GUINT64_FORMAT
+                      " lines written to it",
+                      self->path, guint64(self->dev), guint64(self->ino), guint(open_st.st_nlink), self->lines);
+  /* The path first: a file renamed over ours also leaves ours with no link. */
+  gboolean same = FALSE;
+  const int found = stat(self->path, &path_st) == 0 ? 0 : errno;
+  if (found == 0 && (path_st.st_dev != self->dev || path_st.st_ino != self->ino)) {
+    GST_ELEMENT_ERROR(self, RESOURCE, WRITE,
+                      ("%s was replaced by another file while being written: %s %s not in it, and no more are "
+                       "written.",
+                       self->opened, frames.c_str(), are),
+                      ("%s", debug));
+  } else if (open_st.st_nlink == 0) {
+    GST_ELEMENT_ERROR(
+        self, RESOURCE, NOT_FOUND,
+        ("%s was deleted while being written: %s %s lost, and no more are written.", self->opened, frames.c_str(), are),
+        ("%s", debug));
+  } else if (found == ENOENT || found == ENOTDIR) {
+    GST_ELEMENT_ERROR(self, RESOURCE, NOT_FOUND,
+                      ("%s is no longer there (renamed or removed while being written): %s %s not there, and no "
+                       "more are written.",
+                       self->opened, frames.c_str(), are),
+                      ("%s", debug));
+  } else {
+    /* There, or not to be checked (say, a directory made unreadable: the file
+     * may well be there). */
+    if (found != 0) GST_WARNING_OBJECT(self, "cannot check that %s is still there: %s", self->path, g_strerror(found));
+    same = TRUE;
+  }
+  g_free(debug);
+  if (!same) self->failed = TRUE;
+  return same;
 }
 
 /* Hands `line` to the kernel whole: write(2) until all of it is written,
@@ -282,6 +363,8 @@ static gboolean gst_lftag_publish_write_line(GstLFTagPublish* self, const std::s
 static gboolean gst_lftag_publish_stop(GstBaseTransform* trans) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
 
+  /* Stopped without EOS: a file gone since the last line is still reported. */
+  gst_lftag_publish_check_file(self, 0);
   if (self->unwritten > 0)
     GST_WARNING_OBJECT(self, "%" G_GUINT64_FORMAT " buffers came after the error and were not written",
                        self->unwritten);
@@ -298,9 +381,9 @@ static gboolean gst_lftag_publish_sink_event(GstBaseTransform* trans, GstEvent* 
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
 
   /* Every line is written as it comes, so at EOS everything is in the file;
-   * an EOS after an error goes no further, so that the application does not
-   * take the output for complete. */
-  if (GST_EVENT_TYPE(event) == GST_EVENT_EOS && self->failed) {
+   * an EOS after an error, or on a file that is gone, goes no further, so that
+   * the application does not take the output for complete. */
+  if (GST_EVENT_TYPE(event) == GST_EVENT_EOS && (self->failed || !gst_lftag_publish_check_file(self, 0))) {
     gst_event_unref(event);
     return FALSE;
   }
@@ -336,6 +419,7 @@ static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, Gst
 
   /* One whole line at a time, nothing kept back, so that a reader of a pipe or
    * of a growing file sees whole lines as the frames pass. */
-  if (!gst_lftag_publish_write_line(self, record->dump() + "\n", frame)) return GST_FLOW_ERROR;
+  if (!gst_lftag_publish_check_file(self, 1) || !gst_lftag_publish_write_line(self, record->dump() + "\n", frame))
+    return GST_FLOW_ERROR;
   return GST_FLOW_OK;
 }

@@ -3,7 +3,7 @@
 // JSON as `lftag detect`) and the buffer's timestamps; to a file or the standard output;
 // append; an unwritable location fails the start; which metas survive encoders, decoders
 // and muxers; a warning when there is no meta; a failed write leaves whole lines only and
-// says which frame is lost.
+// says which frame is lost; a file deleted, moved or replaced while written is an error.
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -15,6 +15,7 @@
 #include <vector>
 
 #include <glib/gstdio.h>
+#include <gst/check/gstharness.h>
 #include <nlohmann/json.hpp>
 
 #include "json.hpp"
@@ -193,6 +194,34 @@ Posted parse_error(GstMessage* m) {
 }
 
 bool has(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+// A harness around lftagpublish writing to `path`, its messages on `bus`, fed frames
+// that carry an LFTagMeta (with no detections) by push_frame.
+struct Publisher {
+  GstHarness* h;
+  GstBus* bus;
+  int pushed = 0;
+  explicit Publisher(const std::string& path) {
+    h = gst_harness_new_parse(("lftagpublish name=p location=\"" + path + "\"").c_str());
+    bus = gst_bus_new();
+    gst_element_set_bus(h->element, bus);
+    gst_harness_set_src_caps_str(h, "video/x-raw,format=GRAY8,width=32,height=24,framerate=30/1");
+  }
+  ~Publisher() {
+    gst_harness_teardown(h);
+    gst_object_unref(bus);
+  }
+  Publisher(const Publisher&) = delete;
+  Publisher& operator=(const Publisher&) = delete;
+  GstFlowReturn push_frame() {
+    GstBuffer* buffer = gst_buffer_new_allocate(nullptr, 32 * 24, nullptr);
+    gst_buffer_memset(buffer, 0, 128, 32 * 24);
+    GST_BUFFER_PTS(buffer) = gst_util_uint64_scale(pushed++, GST_SECOND, 30);
+    lftag::gst::add_detection_meta(buffer, 32, 24, {});
+    return gst_harness_push(h, buffer);
+  }
+  GstMessage* error() { return gst_bus_pop_filtered(bus, GST_MESSAGE_ERROR); }
+};
 
 }  // namespace
 
@@ -410,6 +439,72 @@ GST_START_TEST(test_no_space_left) {
 }
 GST_END_TEST;
 
+// The file deleted with its directory while being written: noticed at the next line, at
+// EOS when no line comes, or when stopped without EOS, as an error naming the location
+// and the frames lost.
+GST_START_TEST(test_directory_removed) {
+  enum When { kNextLine, kEos, kStop };
+  for (const When when : {kNextLine, kEos, kStop}) {
+    const ScratchDir scratch;
+    const std::string dir = scratch.path("out");
+    fail_unless(g_mkdir(dir.c_str(), 0700) == 0);
+    const std::string path = dir + "/d.jsonl";
+    Publisher p(path);
+    for (int i = 0; i < 3; ++i) fail_unless_equals_int(p.push_frame(), GST_FLOW_OK);
+    fail_unless_equals_int(read_lines(path).size(), 3);
+    fail_unless(g_unlink(path.c_str()) == 0 && g_rmdir(dir.c_str()) == 0);
+    if (when == kNextLine) {
+      fail_unless_equals_int(p.push_frame(), GST_FLOW_ERROR);
+    } else if (when == kEos) {
+      gst_harness_push_event(p.h, gst_event_new_eos());
+    } else {
+      fail_unless(gst_element_set_state(p.h->element, GST_STATE_NULL) == GST_STATE_CHANGE_SUCCESS);
+    }
+    const Posted error = parse_error(p.error());
+    fail_unless_equals_string(error.source.c_str(), "p");
+    fail_unless(error.domain == GST_RESOURCE_ERROR && error.code == GST_RESOURCE_ERROR_NOT_FOUND, "%s",
+                error.message.c_str());
+    fail_unless(has(error.message, "\"" + path + "\" was deleted"), "%s", error.message.c_str());
+    fail_unless(has(error.message, when == kNextLine ? "the lines of 4 frames" : "the lines of 3 frames"), "%s",
+                error.message.c_str());
+    // Nothing more is written, and no more errors come.
+    if (when == kNextLine) {
+      fail_unless_equals_int(p.push_frame(), GST_FLOW_ERROR);
+      fail_unless(p.error() == nullptr);
+    }
+  }
+}
+GST_END_TEST;
+
+// Another file renamed over it, or itself renamed away, while being written: an error
+// naming the location.
+GST_START_TEST(test_file_replaced_or_moved) {
+  for (const bool replaced : {true, false}) {
+    const ScratchDir scratch;
+    const std::string path = scratch.path("d.jsonl");
+    const std::string other = scratch.path("other.jsonl");
+    Publisher p(path);
+    for (int i = 0; i < 2; ++i) fail_unless_equals_int(p.push_frame(), GST_FLOW_OK);
+    if (replaced) {
+      fail_unless(g_file_set_contents(other.c_str(), "", 0, nullptr));
+      fail_unless(g_rename(other.c_str(), path.c_str()) == 0);
+    } else {
+      fail_unless(g_rename(path.c_str(), other.c_str()) == 0);
+    }
+    fail_unless_equals_int(p.push_frame(), GST_FLOW_ERROR);
+    const Posted error = parse_error(p.error());
+    fail_unless_equals_string(error.source.c_str(), "p");
+    fail_unless(error.domain == GST_RESOURCE_ERROR, "%s", error.message.c_str());
+    fail_unless(has(error.message, "\"" + path + "\""), "%s", error.message.c_str());
+    fail_unless(has(error.message, replaced ? "replaced by another file" : "is no longer there"), "%s",
+                error.message.c_str());
+    fail_unless(has(error.message, "the lines of 3 frames"), "%s", error.message.c_str());
+    // The replacing file is left alone; the moved one keeps its two whole lines.
+    fail_unless_equals_int(read_lines(replaced ? path : other).size(), replaced ? 0 : 2);
+  }
+}
+GST_END_TEST;
+
 static Suite* lftagpublish_suite(void) {
   Suite* s = suite_create("lftagpublish");
   TCase* tc = tcase_create("general");
@@ -422,6 +517,8 @@ static Suite* lftagpublish_suite(void) {
   tcase_add_test(tc, test_times_after_seek);
   tcase_add_test(tc, test_write_error_leaves_whole_lines);
   tcase_add_test(tc, test_no_space_left);
+  tcase_add_test(tc, test_directory_removed);
+  tcase_add_test(tc, test_file_replaced_or_moved);
   return s;
 }
 
