@@ -21,7 +21,18 @@
  * writes no line (the element warns once per stream).
  *
  * A location that cannot be opened for writing fails the state change to PAUSED
- * with an error naming it; a failed write is an error too.
+ * with an error naming it. Each line goes to the kernel whole, in one write(2)
+ * (continued after a short write or a signal), with nothing buffered in the
+ * element. A write that fails (a full disk, a file size limit) is an error that
+ * says why and which frame's line is lost, and the file is cut back to its last
+ * whole line, so that it holds whole lines only; on the standard output, which
+ * lftagpublish does not truncate, the error says whether part of the line went
+ * out. Before each line, at EOS and when stopping, the element checks that the
+ * file it writes is still the one at the location: deleted (or its directory
+ * removed), renamed away or replaced by another file is an error naming the
+ * location and how many frames' lines are not there. After an error nothing more
+ * is written and the file is kept as it is (whole lines only); it is closed when
+ * the element stops.
  *
  * ## Example launch lines
  * |[
@@ -35,9 +46,14 @@
  */
 #include "gstlftagpublish.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <optional>
 #include <string>
 
 #include "lftagjson.h"
@@ -67,9 +83,16 @@ struct _GstLFTagPublish {
   gboolean append;
 
   /* Streaming state: opened in start(), closed in stop(). */
-  FILE* file;
-  gchar* opened; /* the location as opened, for messages */
+  int fd;             /* -1: none */
+  gboolean to_stdout; /* fd is the standard output: never closed, cut or checked */
+  gchar* path;        /* the file's absolute path, for the identity check; null for stdout */
+  gchar* opened;      /* the location as opened, for messages */
+  dev_t dev;          /* the identity of the file opened */
+  ino_t ino;
   guint64 frame;
+  guint64 lines;     /* whole lines written since the start */
+  gboolean failed;   /* an error was posted: nothing more is written */
+  guint64 unwritten; /* buffers refused after the error */
   gboolean warned_no_meta;
 };
 
@@ -123,7 +146,9 @@ static void gst_lftag_publish_class_init(GstLFTagPublishClass* klass) {
 static void gst_lftag_publish_init(GstLFTagPublish* self) {
   self->location = nullptr;
   self->append = DEFAULT_PROP_APPEND;
-  self->file = nullptr;
+  self->fd = -1;
+  self->to_stdout = FALSE;
+  self->path = nullptr;
   self->opened = nullptr;
   /* Like identity: buffers pass untouched, transform_ip only looks at them. */
   gst_base_transform_set_passthrough(GST_BASE_TRANSFORM(self), TRUE);
@@ -134,6 +159,7 @@ static void gst_lftag_publish_finalize(GObject* object) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(object);
 
   g_free(self->location);
+  g_free(self->path);
   g_free(self->opened);
   G_OBJECT_CLASS(parent_class)->finalize(object);
 }
@@ -174,50 +200,190 @@ static gboolean gst_lftag_publish_start(GstBaseTransform* trans) {
   GST_OBJECT_UNLOCK(self);
 
   self->frame = 0;
+  self->lines = 0;
+  self->failed = FALSE;
+  self->unwritten = 0;
   self->warned_no_meta = FALSE;
-  g_free(self->opened);
+  g_clear_pointer(&self->path, g_free);
+  g_clear_pointer(&self->opened, g_free);
   if (location.empty() || location == "-") {
-    self->file = stdout;
+    /* The lines go to the descriptor, not through stdio: whatever the
+     * application printed before goes out first. */
+    fflush(stdout);
+    self->fd = STDOUT_FILENO;
+    self->to_stdout = TRUE;
     self->opened = g_strdup("the standard output");
     return TRUE;
   }
-  self->file = fopen(location.c_str(), append ? "a" : "w");
-  if (!self->file) {
+  self->to_stdout = FALSE;
+  self->fd = open(location.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC | (append ? O_APPEND : O_TRUNC), 0666);
+  struct stat st;
+  if (self->fd < 0 || fstat(self->fd, &st) != 0) {
     const int error = errno;
-    self->opened = nullptr;
+    if (self->fd >= 0) close(self->fd);
+    self->fd = -1;
     GST_ELEMENT_ERROR(self, RESOURCE, OPEN_WRITE,
                       ("Could not open \"%s\" for writing: %s.", location.c_str(), g_strerror(error)), (nullptr));
     return FALSE;
   }
+  self->dev = st.st_dev;
+  self->ino = st.st_ino;
+  /* Absolute, so that the check finds the same file if the process changes
+   * its working directory. */
+  if (g_path_is_absolute(location.c_str())) {
+    self->path = g_strdup(location.c_str());
+  } else {
+    gchar* here = g_get_current_dir();
+    self->path = g_build_filename(here, location.c_str(), nullptr);
+    g_free(here);
+  }
   self->opened = g_strdup_printf("\"%s\"", location.c_str());
-  GST_INFO_OBJECT(self, "writing to %s", self->opened);
+  GST_INFO_OBJECT(self, "writing to %s (%s)", self->opened, self->path);
   return TRUE;
 }
 
-/* Flushes what was written; FALSE (with an error posted) when it failed. */
-static gboolean gst_lftag_publish_flush(GstLFTagPublish* self) {
-  if (!self->file || fflush(self->file) == 0) return TRUE;
-  GST_ELEMENT_ERROR(self, RESOURCE, WRITE, ("Could not write to %s: %s.", self->opened, g_strerror(errno)), (nullptr));
+/* "the line of 1 frame", "the lines of 12 frames". */
+static std::string frames_lines(guint64 n) {
+  return n == 1 ? "the line of 1 frame" : "the lines of " + std::to_string(n) + " frames";
+}
+
+/* Whether the file written is still the one at the location: not deleted (or its
+ * directory removed), renamed away or replaced. When it is not, posts an error
+ * naming the location and how many frames' lines are not there: the lines
+ * written, and `pending` more that were to be. An fstat and a stat, a few
+ * microseconds, once per line. */
+static gboolean gst_lftag_publish_check_file(GstLFTagPublish* self, guint64 pending) {
+  if (self->fd < 0 || self->to_stdout || self->failed) return TRUE;
+
+  struct stat open_st, path_st;
+  if (fstat(self->fd, &open_st) != 0) {
+    GST_WARNING_OBJECT(self, "cannot fstat %s: %s", self->opened, g_strerror(errno));
+    return TRUE;
+  }
+  const guint64 lost = self->lines + pending;
+  const std::string frames = frames_lines(lost);
+  const char* are = lost == 1 ? "is" : "are";
+  gchar* debug =
+      g_strdup_printf("%s: device %" G_GUINT64_FORMAT ", inode %" G_GUINT64_FORMAT ", %u links; %" G_GUINT64_FORMAT
+                      " lines written to it",
+                      self->path, guint64(self->dev), guint64(self->ino), guint(open_st.st_nlink), self->lines);
+  /* The path first: a file renamed over ours also leaves ours with no link. */
+  gboolean same = FALSE;
+  const int found = stat(self->path, &path_st) == 0 ? 0 : errno;
+  if (found == 0 && (path_st.st_dev != self->dev || path_st.st_ino != self->ino)) {
+    GST_ELEMENT_ERROR(self, RESOURCE, WRITE,
+                      ("%s was replaced by another file while being written: %s %s not in it, and no more are "
+                       "written.",
+                       self->opened, frames.c_str(), are),
+                      ("%s", debug));
+  } else if (open_st.st_nlink == 0) {
+    GST_ELEMENT_ERROR(
+        self, RESOURCE, NOT_FOUND,
+        ("%s was deleted while being written: %s %s lost, and no more are written.", self->opened, frames.c_str(), are),
+        ("%s", debug));
+  } else if (found == ENOENT || found == ENOTDIR) {
+    GST_ELEMENT_ERROR(self, RESOURCE, NOT_FOUND,
+                      ("%s is no longer there (renamed or removed while being written): %s %s not there, and no "
+                       "more are written.",
+                       self->opened, frames.c_str(), are),
+                      ("%s", debug));
+  } else {
+    /* There, or not to be checked (say, a directory made unreadable: the file
+     * may well be there). */
+    if (found != 0) GST_WARNING_OBJECT(self, "cannot check that %s is still there: %s", self->path, g_strerror(found));
+    same = TRUE;
+  }
+  g_free(debug);
+  if (!same) self->failed = TRUE;
+  return same;
+}
+
+/* Hands `line` to the kernel whole: write(2) until all of it is written,
+ * through short writes and signals. On failure posts an error saying what
+ * failed and that the line of `frame` is lost, after cutting the file back to
+ * its last whole line (a file this element opened; the standard output is
+ * never cut). */
+static gboolean gst_lftag_publish_write_line(GstLFTagPublish* self, const std::string& line, guint64 frame) {
+  std::size_t done = 0;
+  int error = 0;
+  while (done < line.size()) {
+    const ssize_t n = write(self->fd, line.data() + done, line.size() - done);
+    if (n > 0) {
+      done += std::size_t(n);
+    } else if (n < 0 && errno == EINTR) {
+      continue;
+    } else {
+      error = n < 0 ? errno : EIO;
+      break;
+    }
+  }
+  if (done == line.size()) {
+    ++self->lines;
+    return TRUE;
+  }
+
+  /* The partial line ends at the descriptor's offset (the end of the file,
+   * appending or not): cutting `done` bytes before it leaves the last whole
+   * line at the end. */
+  std::string holds = self->to_stdout ? "nothing of it went out" : "the file holds whole lines only";
+  std::string cut;
+  if (done > 0 && self->to_stdout) {
+    holds = "the standard output ends with part of it";
+  } else if (done > 0) {
+    const off_t end = lseek(self->fd, 0, SEEK_CUR);
+    int cut_error = 0;
+    if (end < 0)
+      cut_error = errno;
+    else if (end < off_t(done))
+      cut_error = EINVAL;
+    else if (ftruncate(self->fd, end - off_t(done)) != 0)
+      cut_error = errno;
+    if (cut_error == 0) {
+      lseek(self->fd, end - off_t(done), SEEK_SET);
+      cut = "; cut back to " + std::to_string(end - off_t(done)) + " bytes";
+    } else {
+      holds = std::string("the file ends with part of it (cutting it off failed: ") + g_strerror(cut_error) + ")";
+    }
+  }
+  gchar* text = g_strdup_printf("Could not write to %s: %s. 1 frame lost (the line of frame %" G_GUINT64_FORMAT
+                                ") and no more written; %s.",
+                                self->opened, g_strerror(error), frame, holds.c_str());
+  gchar* debug = g_strdup_printf("%zu of the line's %zu bytes written after %" G_GUINT64_FORMAT " whole lines%s", done,
+                                 line.size(), self->lines, cut.c_str());
+  if (error == ENOSPC || error == EDQUOT)
+    GST_ELEMENT_ERROR(self, RESOURCE, NO_SPACE_LEFT, ("%s", text), ("%s", debug));
+  else
+    GST_ELEMENT_ERROR(self, RESOURCE, WRITE, ("%s", text), ("%s", debug));
+  g_free(text);
+  g_free(debug);
+  self->failed = TRUE;
   return FALSE;
 }
 
 static gboolean gst_lftag_publish_stop(GstBaseTransform* trans) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
-  gboolean ok = gst_lftag_publish_flush(self);
 
-  if (self->file && self->file != stdout && fclose(self->file) != 0 && ok) {
+  /* Stopped without EOS: a file gone since the last line is still reported. */
+  gst_lftag_publish_check_file(self, 0);
+  if (self->unwritten > 0)
+    GST_WARNING_OBJECT(self, "%" G_GUINT64_FORMAT " buffers came after the error and were not written",
+                       self->unwritten);
+  if (self->fd >= 0 && !self->to_stdout && close(self->fd) != 0) {
     GST_ELEMENT_ERROR(self, RESOURCE, CLOSE, ("Could not close %s: %s.", self->opened, g_strerror(errno)), (nullptr));
-    ok = FALSE;
   }
-  self->file = nullptr;
-  return ok;
+  self->fd = -1;
+  /* Stopping succeeds whatever happened to the file (the error is posted):
+   * the pipeline must be able to reach NULL. */
+  return TRUE;
 }
 
 static gboolean gst_lftag_publish_sink_event(GstBaseTransform* trans, GstEvent* event) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
 
-  /* Everything is on disk before EOS reaches the sink (and the application). */
-  if (GST_EVENT_TYPE(event) == GST_EVENT_EOS && !gst_lftag_publish_flush(self)) {
+  /* Every line is written as it comes, so at EOS everything is in the file;
+   * an EOS after an error, or on a file that is gone, goes no further, so that
+   * the application does not take the output for complete. */
+  if (GST_EVENT_TYPE(event) == GST_EVENT_EOS && (self->failed || !gst_lftag_publish_check_file(self, 0))) {
     gst_event_unref(event);
     return FALSE;
   }
@@ -228,6 +394,10 @@ static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, Gst
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
   const guint64 frame = self->frame++;
 
+  if (self->failed) {
+    ++self->unwritten;
+    return GST_FLOW_ERROR;
+  }
   std::optional<nlohmann::ordered_json> record;
   try {
     record = lftag::gst::buffer_json(buffer, trans->segment, frame);
@@ -247,13 +417,9 @@ static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, Gst
     return GST_FLOW_OK;
   }
 
-  const std::string line = record->dump() + "\n";
-  /* One line at a time, so that a reader of a pipe or of a growing file sees
-   * whole lines as the frames pass. */
-  if (fwrite(line.data(), 1, line.size(), self->file) != line.size() || fflush(self->file) != 0) {
-    GST_ELEMENT_ERROR(self, RESOURCE, WRITE, ("Could not write to %s: %s.", self->opened, g_strerror(errno)),
-                      (nullptr));
+  /* One whole line at a time, nothing kept back, so that a reader of a pipe or
+   * of a growing file sees whole lines as the frames pass. */
+  if (!gst_lftag_publish_check_file(self, 1) || !gst_lftag_publish_write_line(self, record->dump() + "\n", frame))
     return GST_FLOW_ERROR;
-  }
   return GST_FLOW_OK;
 }

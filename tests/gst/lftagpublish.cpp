@@ -2,15 +2,20 @@
 // lftagpublish: one JSON line per buffer with an LFTagMeta, matching the meta (the same
 // JSON as `lftag detect`) and the buffer's timestamps; to a file or the standard output;
 // append; an unwritable location fails the start; which metas survive encoders, decoders
-// and muxers; a warning when there is no meta.
+// and muxers; a warning when there is no meta; a failed write leaves whole lines only and
+// says which frame is lost; a file deleted, moved or replaced while written is an error.
+#include <sys/resource.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <string>
 #include <vector>
 
 #include <glib/gstdio.h>
+#include <gst/check/gstharness.h>
 #include <nlohmann/json.hpp>
 
 #include "json.hpp"
@@ -146,6 +151,77 @@ void expect_lines_match(const std::vector<nlohmann::json>& lines, const Run& run
     fail_unless(line.at("detections") == expected, "frame %d: %s", int(i), line.at("detections").dump().c_str());
   }
 }
+
+// The file's bytes.
+std::string contents(const std::string& path) {
+  gchar* text = nullptr;
+  gsize size = 0;
+  if (!g_file_get_contents(path.c_str(), &text, &size, nullptr)) return "";
+  std::string out(text, size);
+  g_free(text);
+  return out;
+}
+
+// The file's lines, each with its '\n' (the last one without, if it has none).
+std::vector<std::string> raw_lines(const std::string& path) {
+  const std::string text = contents(path);
+  std::vector<std::string> lines;
+  for (std::size_t begin = 0; begin < text.size();) {
+    const std::size_t end = text.find('\n', begin);
+    const std::size_t next = end == std::string::npos ? text.size() : end + 1;
+    lines.push_back(text.substr(begin, next - begin));
+    begin = next;
+  }
+  return lines;
+}
+
+// An element error: its source, domain, code and message.
+struct Posted {
+  std::string source;
+  GQuark domain = 0;
+  int code = 0;
+  std::string message;
+};
+
+Posted parse_error(GstMessage* m) {
+  fail_unless(m != nullptr && GST_MESSAGE_TYPE(m) == GST_MESSAGE_ERROR, "no error posted");
+  GError* error = nullptr;
+  gst_message_parse_error(m, &error, nullptr);
+  Posted posted{GST_OBJECT_NAME(GST_MESSAGE_SRC(m)), error->domain, error->code, error->message};
+  g_error_free(error);
+  gst_message_unref(m);
+  return posted;
+}
+
+bool has(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+// A harness around lftagpublish writing to `path`, its messages on `bus`, fed frames
+// that carry an LFTagMeta (with no detections) by push_frame.
+struct Publisher {
+  GstHarness* h;
+  GstBus* bus;
+  int pushed = 0;
+  explicit Publisher(const std::string& path) {
+    h = gst_harness_new_parse(("lftagpublish name=p location=\"" + path + "\"").c_str());
+    bus = gst_bus_new();
+    gst_element_set_bus(h->element, bus);
+    gst_harness_set_src_caps_str(h, "video/x-raw,format=GRAY8,width=32,height=24,framerate=30/1");
+  }
+  ~Publisher() {
+    gst_harness_teardown(h);
+    gst_object_unref(bus);
+  }
+  Publisher(const Publisher&) = delete;
+  Publisher& operator=(const Publisher&) = delete;
+  GstFlowReturn push_frame() {
+    GstBuffer* buffer = gst_buffer_new_allocate(nullptr, 32 * 24, nullptr);
+    gst_buffer_memset(buffer, 0, 128, 32 * 24);
+    GST_BUFFER_PTS(buffer) = gst_util_uint64_scale(pushed++, GST_SECOND, 30);
+    lftag::gst::add_detection_meta(buffer, 32, 24, {});
+    return gst_harness_push(h, buffer);
+  }
+  GstMessage* error() { return gst_bus_pop_filtered(bus, GST_MESSAGE_ERROR); }
+};
 
 }  // namespace
 
@@ -291,6 +367,144 @@ GST_START_TEST(test_times_after_seek) {
 }
 GST_END_TEST;
 
+// A write that fails part way through a line (here at the process's file size limit, as
+// on a full disk) cuts the file back to its last whole line and posts an error saying
+// why and which frame's line is lost.
+GST_START_TEST(test_write_error_leaves_whole_lines) {
+  const ScratchDir scratch;
+  const std::string reference = scratch.path("reference.jsonl");
+  const std::string path = scratch.path("limited.jsonl");
+  const std::string launch = "lftagtestsrc num-buffers=8 ids=6789,42 ! lftagdetect ! lftagpublish name=p location=";
+  Run run;
+  run_pipeline(launch + reference + " ! fakesink name=sink", run);
+  const std::vector<std::string> lines = raw_lines(reference);
+  fail_unless_equals_int(lines.size(), 8);
+  // Room for three lines and half of the fourth.
+  const std::string three = lines[0] + lines[1] + lines[2];
+  const rlim_t limit = three.size() + lines[3].size() / 2;
+
+  GstElement* pipeline = gst_parse_launch((launch + path + " ! fakesink").c_str(), nullptr);
+  fail_unless(pipeline != nullptr);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  struct rlimit saved;
+  fail_unless(getrlimit(RLIMIT_FSIZE, &saved) == 0);
+  fail_unless(saved.rlim_max == RLIM_INFINITY || saved.rlim_max >= limit);
+  struct rlimit small = saved;
+  small.rlim_cur = limit;
+  // The limit holds for the whole process, check's own log file included: no check
+  // macro until it is lifted. Ignored SIGXFSZ makes the write past it fail with EFBIG.
+  void (*const handler)(int) = std::signal(SIGXFSZ, SIG_IGN);
+  const int limited = setrlimit(RLIMIT_FSIZE, &small);
+  const GstStateChangeReturn started = gst_element_set_state(pipeline, GST_STATE_PLAYING);
+  GstMessage* m = gst_bus_timed_pop_filtered(bus, GST_CLOCK_TIME_NONE,
+                                             GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR));
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  setrlimit(RLIMIT_FSIZE, &saved);
+  std::signal(SIGXFSZ, handler);
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+
+  fail_unless(limited == 0);
+  fail_unless(started != GST_STATE_CHANGE_FAILURE);
+  const Posted error = parse_error(m);
+  fail_unless_equals_string(error.source.c_str(), "p");
+  // The first three lines, whole, and nothing of the fourth.
+  const std::string written = contents(path);
+  fail_unless(written == three, "%zu bytes written, the three whole lines are %zu", written.size(), three.size());
+  fail_unless_equals_int(read_lines(path).size(), 3);
+  fail_unless(error.domain == GST_RESOURCE_ERROR && error.code == GST_RESOURCE_ERROR_WRITE, "%s",
+              error.message.c_str());
+  fail_unless(has(error.message, path) && has(error.message, g_strerror(EFBIG)), "%s", error.message.c_str());
+  fail_unless(has(error.message, "1 frame lost (the line of frame 3)"), "%s", error.message.c_str());
+}
+GST_END_TEST;
+
+// No space left: the error says so, with its own code, and which frame is lost.
+GST_START_TEST(test_no_space_left) {
+  GstElement* pipeline =
+      gst_parse_launch("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p location=/dev/full ! fakesink",
+                       nullptr);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+  const Posted error = parse_error(
+      gst_bus_timed_pop_filtered(bus, GST_CLOCK_TIME_NONE, GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR)));
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+  fail_unless_equals_string(error.source.c_str(), "p");
+  fail_unless(error.domain == GST_RESOURCE_ERROR && error.code == GST_RESOURCE_ERROR_NO_SPACE_LEFT, "%s",
+              error.message.c_str());
+  fail_unless(has(error.message, "/dev/full") && has(error.message, g_strerror(ENOSPC)), "%s", error.message.c_str());
+  fail_unless(has(error.message, "1 frame lost (the line of frame 0)"), "%s", error.message.c_str());
+}
+GST_END_TEST;
+
+// The file deleted with its directory while being written: noticed at the next line, at
+// EOS when no line comes, or when stopped without EOS, as an error naming the location
+// and the frames lost.
+GST_START_TEST(test_directory_removed) {
+  enum When { kNextLine, kEos, kStop };
+  for (const When when : {kNextLine, kEos, kStop}) {
+    const ScratchDir scratch;
+    const std::string dir = scratch.path("out");
+    fail_unless(g_mkdir(dir.c_str(), 0700) == 0);
+    const std::string path = dir + "/d.jsonl";
+    Publisher p(path);
+    for (int i = 0; i < 3; ++i) fail_unless_equals_int(p.push_frame(), GST_FLOW_OK);
+    fail_unless_equals_int(read_lines(path).size(), 3);
+    fail_unless(g_unlink(path.c_str()) == 0 && g_rmdir(dir.c_str()) == 0);
+    if (when == kNextLine) {
+      fail_unless_equals_int(p.push_frame(), GST_FLOW_ERROR);
+    } else if (when == kEos) {
+      gst_harness_push_event(p.h, gst_event_new_eos());
+    } else {
+      fail_unless(gst_element_set_state(p.h->element, GST_STATE_NULL) == GST_STATE_CHANGE_SUCCESS);
+    }
+    const Posted error = parse_error(p.error());
+    fail_unless_equals_string(error.source.c_str(), "p");
+    fail_unless(error.domain == GST_RESOURCE_ERROR && error.code == GST_RESOURCE_ERROR_NOT_FOUND, "%s",
+                error.message.c_str());
+    fail_unless(has(error.message, "\"" + path + "\" was deleted"), "%s", error.message.c_str());
+    fail_unless(has(error.message, when == kNextLine ? "the lines of 4 frames" : "the lines of 3 frames"), "%s",
+                error.message.c_str());
+    // Nothing more is written, and no more errors come.
+    if (when == kNextLine) {
+      fail_unless_equals_int(p.push_frame(), GST_FLOW_ERROR);
+      fail_unless(p.error() == nullptr);
+    }
+  }
+}
+GST_END_TEST;
+
+// Another file renamed over it, or itself renamed away, while being written: an error
+// naming the location.
+GST_START_TEST(test_file_replaced_or_moved) {
+  for (const bool replaced : {true, false}) {
+    const ScratchDir scratch;
+    const std::string path = scratch.path("d.jsonl");
+    const std::string other = scratch.path("other.jsonl");
+    Publisher p(path);
+    for (int i = 0; i < 2; ++i) fail_unless_equals_int(p.push_frame(), GST_FLOW_OK);
+    if (replaced) {
+      fail_unless(g_file_set_contents(other.c_str(), "", 0, nullptr));
+      fail_unless(g_rename(other.c_str(), path.c_str()) == 0);
+    } else {
+      fail_unless(g_rename(path.c_str(), other.c_str()) == 0);
+    }
+    fail_unless_equals_int(p.push_frame(), GST_FLOW_ERROR);
+    const Posted error = parse_error(p.error());
+    fail_unless_equals_string(error.source.c_str(), "p");
+    fail_unless(error.domain == GST_RESOURCE_ERROR, "%s", error.message.c_str());
+    fail_unless(has(error.message, "\"" + path + "\""), "%s", error.message.c_str());
+    fail_unless(has(error.message, replaced ? "replaced by another file" : "is no longer there"), "%s",
+                error.message.c_str());
+    fail_unless(has(error.message, "the lines of 3 frames"), "%s", error.message.c_str());
+    // The replacing file is left alone; the moved one keeps its two whole lines.
+    fail_unless_equals_int(read_lines(replaced ? path : other).size(), replaced ? 0 : 2);
+  }
+}
+GST_END_TEST;
+
 static Suite* lftagpublish_suite(void) {
   Suite* s = suite_create("lftagpublish");
   TCase* tc = tcase_create("general");
@@ -301,6 +515,10 @@ static Suite* lftagpublish_suite(void) {
   tcase_add_test(tc, test_unwritable_location);
   tcase_add_test(tc, test_after_encode_and_decode);
   tcase_add_test(tc, test_times_after_seek);
+  tcase_add_test(tc, test_write_error_leaves_whole_lines);
+  tcase_add_test(tc, test_no_space_left);
+  tcase_add_test(tc, test_directory_removed);
+  tcase_add_test(tc, test_file_replaced_or_moved);
   return s;
 }
 
