@@ -306,6 +306,8 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
   const auto overlaps_any = [](const cv::Rect& box, const std::vector<cv::Rect>& boxes) {
     return std::any_of(boxes.begin(), boxes.end(), [&](const cv::Rect& t) { return (t & box).area() > 0; });
   };
+  // The regions of each cluster, by its root: filled the first time a hull is needed.
+  std::vector<std::vector<int>> members;
   for (std::size_t i = 0; i < small.size(); ++i) {
     if (find_root(parent, int(i)) != int(i)) continue;
     const Cluster& c = clusters[i];
@@ -318,10 +320,11 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     if (ring > 0.25) continue;
     const cv::Rect box(c.x0, c.y0, w, h);
     const auto hull = [&] {
-      std::vector<int> members;
-      for (std::size_t k = 0; k < small.size(); ++k)
-        if (find_root(parent, int(k)) == int(i)) members.push_back(small[k].region);
-      return region_hull(tree, members);
+      if (members.empty()) {
+        members.resize(small.size());
+        for (std::size_t k = 0; k < small.size(); ++k) members[find_root(parent, int(k))].push_back(small[k].region);
+      }
+      return region_hull(tree, members[i]);
     };
     if (!overlaps_any(box, taken) && !resolved(box, hull, c.smaller_marker)) found.emplace_back(ring, box);
   }
