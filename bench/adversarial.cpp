@@ -37,8 +37,9 @@ constexpr double kGridDepth = 3.0;  // metres: behind every marker
 // 2-cell margin, 2-cell dots 2 cells apart, a 2-cell margin, then 2 cells of grout: a
 // pitch of 4 * dots + 4 cells, `pitch_px` pixels where the plane meets the optical axis.
 // What lies behind the real markers: a photo, a grid of dotted tiles, a field of
-// look-alikes or of torn 6x6 markers on a plane, or look-alikes scattered over a photo.
-enum class Kind { ordinary, grid, lookalikes, torn, scattered };
+// look-alikes or of torn 6x6 markers on a plane, look-alikes scattered over a photo, or a
+// frame of a real video in low light (sensor noise over the whole frame).
+enum class Kind { ordinary, grid, lookalikes, torn, scattered, low_light };
 
 struct Variant {
   std::string name;
@@ -66,6 +67,7 @@ const std::vector<Variant> kVariants{
     {"lookalikes-on-photo", 0, false, 0, 0, 0, Kind::scattered},
     {"lookalikes-18px-blurred", 0, false, 18, -10, 20, Kind::lookalikes, 1.2},
     {"torn-6x6-80px", 0, false, 80, 10, 15, Kind::torn},
+    {"low-light-video", 0, false, 0, 0, 0, Kind::low_light},
 };
 
 // The families of the real markers in every frame, and the detector configurations.
@@ -96,7 +98,7 @@ constexpr Plan kFull{3, 7}, kQuick{1, 1};
 // The quick mode: the ordinary frame, two walls and a field of look-alikes, with the
 // element's set-ups only.
 bool in_quick(const std::string& name) {
-  return name == "ordinary" || name == "white-4-10px" || name == "white-9-16px" || name == "lookalikes-60px" ||
+  return name == "ordinary" || name == "white-4-10px" || name == "white-9-16px" || name == "lookalikes-60px" || name == "low-light-video" ||
          name == "all" || name == "default";
 }
 
@@ -191,7 +193,8 @@ cv::Mat1f field_albedo(const Variant& v, cv::Size cells, int tile, std::mt19937_
   return albedo;
 }
 
-Frame make_frame(const Variant& v, const std::vector<Source>& photos, int index, std::uint64_t seed) {
+Frame make_frame(const Variant& v, const std::vector<Source>& photos, const std::vector<Source>& video_sources,
+                 FrameReader& videos, int index, std::uint64_t seed) {
   std::mt19937_64 rng = seeded(seed, {0xad5e, std::uint64_t(index)});
   std::uniform_real_distribution<double> unit(0, 1);
   lftag::SceneParams params;
@@ -199,6 +202,14 @@ Frame make_frame(const Variant& v, const std::vector<Source>& photos, int index,
   std::vector<lftag::SceneTarget> targets;
   if (v.kind == Kind::ordinary || v.kind == Kind::scattered) {
     params.photo = cv::imread(photos[std::size_t(index) % photos.size()].path.string(), cv::IMREAD_GRAYSCALE);
+  }
+  if (v.kind == Kind::low_light) {
+    // Paper at about 70 grey levels over a black level of 10 (exposure 0.26 of the
+    // others'), sensor noise of 6 levels: the real low-light video of the hardening issue.
+    const int source = index % int(video_sources.size());
+    params.photo = videos.read(source, (20 + 37 * index) % video_sources[std::size_t(source)].frames);
+    params.exposure = 0.26;
+    params.noise_sigma = 6;
   }
   if (v.kind == Kind::scattered) {
     // 40 look-alikes of every family over the photo, 40 to 120 px, turned and tilted.
@@ -255,10 +266,11 @@ Frame make_frame(const Variant& v, const std::vector<Source>& photos, int index,
     const lftag::MarkerTruth t = lftag::make_truth(params.camera, m);
     frame.markers.push_back({m.family, m.id, t.center, t.edge_px});
   }
-  if (v.defocus_px > 0) {
-    params.noise_sigma = 2;
+  if (v.defocus_px > 0 || v.kind == Kind::low_light) {
+    if (v.defocus_px > 0) params.noise_sigma = 2;
     cv::Mat1f linear = lftag::SceneRenderer(params).render_linear(targets);
-    cv::GaussianBlur(linear, linear, cv::Size(), v.defocus_px);
+    if (v.defocus_px > 0) cv::GaussianBlur(linear, linear, cv::Size(), v.defocus_px);
+    if (v.kind == Kind::low_light) linear += 10;
     frame.image = lftag::SceneRenderer(params).quantize(linear, seed + std::uint64_t(index));
   } else {
     frame.image = lftag::SceneRenderer(params).render(targets);
@@ -280,9 +292,9 @@ struct Result {
 
 bool run_adversarial(const Options& options) {
   const Plan plan = options.quick ? kQuick : kFull;
-  std::vector<Source> photos;
-  for (const Source& s : list_sources(options.data))
-    if (!s.video) photos.push_back(s);
+  std::vector<Source> photos, video_sources;
+  for (const Source& s : list_sources(options.data)) (s.video ? video_sources : photos).push_back(s);
+  FrameReader videos(video_sources);
 
   std::vector<Variant> variants;
   for (const Variant& v : kVariants)
@@ -290,7 +302,7 @@ bool run_adversarial(const Options& options) {
   std::map<std::string, std::vector<Frame>> frames;
   for (const Variant& v : variants) {
     progress("adversarial: rendering " + v.name);
-    for (int f = 0; f < plan.frames; ++f) frames[v.name].push_back(make_frame(v, photos, f, options.seed));
+    for (int f = 0; f < plan.frames; ++f) frames[v.name].push_back(make_frame(v, photos, video_sources, videos, f, options.seed));
   }
 
   Csv csv(options.out / "adversarial.csv",
