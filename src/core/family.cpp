@@ -46,8 +46,8 @@ std::string Family::name() const { return std::to_string(n_) + "x" + std::to_str
 
 TagId Family::max_id() const {
   const int bits = 2 * data_cell_count();  // at most 124
-  if (bits >= 64) return TagId(~std::uint64_t{0} >> (128 - bits), ~std::uint64_t{0});
-  return TagId((std::uint64_t{1} << bits) - 1);
+  if (bits > 64) return TagId(~std::uint64_t{0} >> (128 - bits), ~std::uint64_t{0});
+  return TagId(bits == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << bits) - 1);  // a shift by 64 is undefined
 }
 
 std::string Family::dictionary_size() const {

@@ -20,6 +20,11 @@ inline cv::Point2d polygon_centroid(const std::vector<cv::Point2d>& poly) {
     const double cross = p.x * q.y - q.x * p.y;
     a += cross, cx += (p.x + q.x) * cross, cy += (p.y + q.y) * cross;
   }
+  if (a == 0) {  // degenerate (collinear or empty): the vertices' mean
+    cv::Point2d mean;
+    for (const cv::Point2d& p : poly) mean += p;
+    return poly.empty() ? mean : mean / double(poly.size());
+  }
   return {cx / (3 * a), cy / (3 * a)};
 }
 

@@ -381,8 +381,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   auto start = Clock::now();
   const detail::Deadline deadline(detail::Deadline::thread_time(), p.deadline_ms);
   const Camera& camera = s.camera_for(image.width, image.height);
-  const ImageView& work = image;
-  detail::threshold_mean(work, p.threshold_window, p.threshold_offset, s.mean, s.binary);
+  detail::threshold_mean(image, p.threshold_window, p.threshold_offset, s.mean, s.binary);
   stats.threshold_ms = elapsed_ms(start);
   if (trace) trace->binary = s.binary.to_mat();
 
@@ -400,12 +399,12 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   };
 
   start = Clock::now();
-  detail::find_candidates(s.tree, s.binary, work, p, camera, s.candidates, stats, {},
+  detail::find_candidates(s.tree, s.binary, image, p, camera, s.candidates, stats, {},
                           trace ? &s.area_rejected : nullptr, budget_left, trace ? &s.skipped : nullptr);
   stats.candidates_ms = elapsed_ms(start);
   record_rejected(false);
 
-  decode_candidates(s.candidates, work, camera, p, false, deadline, stats, trace, found);
+  decode_candidates(s.candidates, image, camera, p, false, deadline, stats, trace, found);
 
   // The second look, around clusters that no detection covers (not sought at all once the
   // deadline has passed).
@@ -417,7 +416,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
     std::vector<cv::Rect> taken;
     for (const Detection& d : found)
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
-    std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, work, look, taken);
+    std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, image, look, taken);
     int outline_reads_left = detail::kMaxOutlineReads;
     if (int(boxes.size()) > p.max_second_looks) {
       stats.second_looks_skipped += std::int64_t(boxes.size()) - p.max_second_looks;
@@ -436,7 +435,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       const cv::Rect& box = boxes[i];
       start = Clock::now();
       ++stats.second_looks;
-      if (!detail::enlarge_patch(work, box, look, s.patch)) {
+      if (!detail::enlarge_patch(image, box, look, s.patch)) {
         stats.second_look_ms += elapsed_ms(start);
         continue;
       }
@@ -449,10 +448,10 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       if (trace) trace->second_looks.push_back(box);
       record_rejected(true);
       const std::size_t before = found.size();
-      decode_candidates(s.candidates, work, camera, p, true, deadline, stats, trace, found);
+      decode_candidates(s.candidates, image, camera, p, true, deadline, stats, trace, found);
       if (found.size() == before) {
         start = Clock::now();
-        read_outlines(s.patch_binary, s.patch.frame, work, camera, p, deadline, stats, found, outline_reads_left,
+        read_outlines(s.patch_binary, s.patch.frame, image, camera, p, deadline, stats, found, outline_reads_left,
                       trace);
         stats.second_look_ms += elapsed_ms(start);
       }

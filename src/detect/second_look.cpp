@@ -312,7 +312,8 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     if (find_root(parent, int(i)) != int(i)) continue;
     const Cluster& c = clusters[i];
     const int w = c.x1 - c.x0 + 1, h = c.y1 - c.y0 + 1;
-    // A marker's size, like a marker in ink and pieces (at least 5 measured), and alone
+    // A marker's size, like a marker in ink and in pieces (4 at least; the markers measured
+    // had 5 or more), and alone
     // on its white margin. Of the clusters in photos, about 2 in 1,000 pass.
     if (!marker_sized(w, h)) continue;
     if (!marker_like(c.ink, c.pieces, w, h, 4) || c.larger_marker) continue;

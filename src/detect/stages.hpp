@@ -309,7 +309,9 @@ double signed_angle(cv::Point2d a, cv::Point2d b);
 // How a decoding ended: rejected because the marker is too small to read, by tau3 or the
 // cell residual bound, because no hypothesis's squares' ink matches the design (checked
 // before the grey levels, when no hypothesis could pass it), because another id fits
-// within the margin, or accepted (the best reading's own ink check comes after).
+// within the margin, or accepted (the best reading's own ink check comes after). In the
+// order a decoding gets through them: detector.cpp compares verdicts by it (a later one
+// passed every check of the earlier ones).
 enum class Verdict { resolution, residual, ink, margin, accepted };
 
 struct Decoding {

@@ -298,7 +298,9 @@ class Detector {
 
   // Detects markers. Throws std::invalid_argument for an empty (0 x 0) image, a null
   // pointer or a stride shorter than the width, and for a frame the camera's calibration
-  // cannot be scaled to (Camera::for_frame). `stats` and `trace` are filled when not null.
+  // cannot be scaled to (Camera::for_frame). When not null, `stats` has this frame's
+  // counts and times added to it (so one DetectionStats sums many frames) and `trace` is
+  // replaced by this frame's.
   // Not thread-safe on one Detector (see the top of this file); `image` is only read.
   std::vector<Detection> detect(const ImageView& image, DetectionStats* stats = nullptr,
                                 DetectionTrace* trace = nullptr);
