@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstddef>
+#include <string>
 #include <string_view>
 
 #include "lftag/camera.hpp"
@@ -21,5 +22,11 @@ inline constexpr int kMaxEntryValues = 256;                   // scalars in one 
 // Throws std::runtime_error saying what is wrong and what was expected (no file name: the
 // caller adds it).
 Camera read_calibration(std::string_view text);
+
+// Why `path` is not a regular file ("does not exist", "is a FIFO", "is a directory", "is
+// a character device", "is a symbolic link loop", ...), or empty when it is one. Nothing
+// is opened: opening a FIFO waits for a writer, and opening a device can act on it.
+// Camera::load and the image reader (image_file.cpp) both ask it first.
+std::string not_a_regular_file(const std::string& path);
 
 }  // namespace lftag::detail
