@@ -35,5 +35,10 @@ Camera read_calibration(std::string_view text);
 // is opened: opening a FIFO waits for a writer, and opening a device can act on it.
 // Camera::load and the image reader (image_file.cpp) both ask it first.
 std::string not_a_regular_file(const std::string& path);
+// Whether that reason says what the path is (a FIFO, a directory...), which a message
+// can follow with what was expected.
+inline bool names_a_kind(const std::string& reason) {
+  return reason.rfind("is ", 0) == 0 && reason.find("does not exist") == std::string::npos;
+}
 
 }  // namespace lftag::detail

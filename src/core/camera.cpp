@@ -58,7 +58,7 @@ Camera Camera::load(const std::string& path) {
   // one that has none), and opening a device can act on it.
   if (const std::string problem = detail::not_a_regular_file(path); !problem.empty())
     throw std::runtime_error(name + " cannot be opened: it " + problem +
-                             (problem == "does not exist" ? "" : ", expected a regular file"));
+                             (detail::names_a_kind(problem) ? ", expected a regular file" : ""));
   // Should the path have become a FIFO since, O_NONBLOCK keeps the open from waiting, and
   // fstat tells what was opened.
   const FileDescriptor file{::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_NOCTTY | O_CLOEXEC)};

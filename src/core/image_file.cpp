@@ -404,7 +404,8 @@ std::optional<cv::Size> webp_size(const unsigned char* head, std::size_t n) {
 
 Header read_header(const std::string& path) {
   if (const std::string problem = detail::not_a_regular_file(path); !problem.empty())
-    throw std::runtime_error("'" + path + "' " + problem + ", not an image file");
+    throw std::runtime_error("'" + path + "' " + problem +
+                             (detail::names_a_kind(problem) ? ", not an image file" : ""));
   Reader r(path);
   if (!r.is_open()) throw std::runtime_error("cannot open '" + path + "'");
   unsigned char head[132] = {};
