@@ -61,15 +61,18 @@ std::string ignored_pinhole(const PinholeSettings& pinhole, bool calibrated) {
 
 gboolean load_calibration(GstElement* element, const std::string& path, std::optional<Camera>& calibration) {
   calibration.reset();
-  if (!g_file_test(path.c_str(), G_FILE_TEST_IS_REGULAR)) {
-    GST_ELEMENT_ERROR(element, RESOURCE, NOT_FOUND, ("Calibration file \"%s\" does not exist.", path.c_str()),
-                      (nullptr));
-    return FALSE;
-  }
+  // Camera::load says what the path is when it is no regular file (it does not exist, is
+  // a FIFO, a directory, a device, a symbolic link loop) before opening anything, as
+  // lftag --calibration does.
   try {
     calibration = Camera::load(path);
   } catch (const std::exception& e) {
-    GST_ELEMENT_ERROR(element, RESOURCE, SETTINGS, ("Invalid %s.", e.what()), (nullptr));
+    std::string message = e.what();
+    if (!message.empty()) message[0] = g_ascii_toupper(message[0]);
+    if (g_file_test(path.c_str(), G_FILE_TEST_EXISTS))
+      GST_ELEMENT_ERROR(element, RESOURCE, SETTINGS, ("%s.", message.c_str()), (nullptr));
+    else
+      GST_ELEMENT_ERROR(element, RESOURCE, NOT_FOUND, ("%s.", message.c_str()), (nullptr));
     return FALSE;
   }
   return TRUE;

@@ -52,8 +52,9 @@ Camera frame_camera(const PinholeSettings& pinhole, const std::optional<Camera>&
 std::string ignored_pinhole(const PinholeSettings& pinhole, bool calibrated);
 
 /* Loads the calibration file at `path` into `calibration`. On failure posts an element
- * error on `element` that names the file and what is wrong (missing, or malformed) and
- * returns FALSE, so that the state change fails. */
+ * error on `element` with Camera::load's message, which names the file and what is wrong
+ * (missing, not a regular file, malformed), and returns FALSE, so that the state change
+ * fails. */
 gboolean load_calibration(GstElement* element, const std::string& path, std::optional<Camera>& calibration);
 
 }  // namespace lftag::gst

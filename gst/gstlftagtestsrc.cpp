@@ -537,16 +537,15 @@ static gboolean gst_lftag_test_src_start(GstBaseSrc* bsrc) {
                         (nullptr));
       return FALSE;
     }
-    if (!g_file_test(path, G_FILE_TEST_IS_REGULAR)) {
-      GST_ELEMENT_ERROR(self, RESOURCE, NOT_FOUND, ("Background photo \"%s\" does not exist.", path), (nullptr));
-      return FALSE;
-    }
+    // read_grey_image refuses, with its reason, what is not a regular file (a FIFO would
+    // block the start), a format or header it cannot check and an image over its limit.
     try {
       st.photo = lftag::read_grey_image(s.background_location);
     } catch (const std::exception& e) {
-      GST_ELEMENT_ERROR(self, RESOURCE, READ,
-                        ("Background photo \"%s\" is not an image file that can be read: %s.", path, e.what()),
-                        (nullptr));
+      if (g_file_test(path, G_FILE_TEST_EXISTS))
+        GST_ELEMENT_ERROR(self, RESOURCE, READ, ("background-location: %s.", e.what()), (nullptr));
+      else
+        GST_ELEMENT_ERROR(self, RESOURCE, NOT_FOUND, ("background-location: %s.", e.what()), (nullptr));
       return FALSE;
     }
   }

@@ -7,10 +7,13 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cfloat>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -19,6 +22,8 @@
 #include <string>
 #include <utility>
 #include <vector>
+
+#include <sys/stat.h>
 
 #include <libxml/parser.h>
 #include <libxml/tree.h>
@@ -50,9 +55,37 @@ std::string excerpt(std::string_view s) {
   return out + "'";
 }
 
+// A set of bytes, and the first byte of `text` from `from` that is (or is not) in it: a
+// loop over a table, several times faster than string_view's find_first_of, which the
+// passes over whole files below would otherwise spend most of their time in.
+struct ByteSet {
+  bool has[256] = {};
+  constexpr explicit ByteSet(const char* bytes) {
+    for (; *bytes; ++bytes) has[static_cast<unsigned char>(*bytes)] = true;
+  }
+};
+
+std::size_t find_in(std::string_view text, std::size_t from, const ByteSet& set, bool in = true) {
+  for (; from < text.size(); ++from)
+    if (set.has[static_cast<unsigned char>(text[from])] == in) return from;
+  return std::string_view::npos;
+}
+
+// Whether `text` holds `needle`: Horspool's search skips ahead by the needle's length,
+// where string_view::find stops at every '<' of a file of a million tags.
+bool contains(std::string_view text, std::string_view needle) {
+  return std::search(text.begin(), text.end(), std::boyer_moore_horspool_searcher(needle.begin(), needle.end())) !=
+         text.end();
+}
+
 const std::string kDepthError =
     "it nests deeper than " + std::to_string(kMaxCalibrationDepth) +
     " levels; a calibration file is a flat list of entries with matrices in them";
+
+std::string nodes_error(const char* nodes) {
+  return "it has more than " + std::to_string(kMaxCalibrationNodes) + " " + nodes +
+         "; a calibration file is a short list of entries with matrices in them";
+}
 
 // ---------------------------------------------------------------------------
 // The entries a calibration needs, as read from any of the formats.
@@ -138,6 +171,11 @@ class YamlEvents {
       fail(what);
     }
     has_event_ = true;
+    // Each node costs libyaml an event or two: their number bounds the time.
+    if ((event_.type == YAML_SCALAR_EVENT || event_.type == YAML_SEQUENCE_START_EVENT ||
+         event_.type == YAML_MAPPING_START_EVENT) &&
+        ++nodes_ > kMaxCalibrationNodes)
+      fail(nodes_error("YAML nodes (keys, values, lists and mappings)"));
     // An alias repeats a subtree: a few bytes can stand for billions of nodes.
     const yaml_char_t* anchor = nullptr;
     switch (event_.type) {
@@ -159,6 +197,7 @@ class YamlEvents {
   yaml_parser_t parser_{};
   yaml_event_t event_{};
   bool has_event_ = false;
+  int nodes_ = 0;
 };
 
 std::string scalar_text(const yaml_event_t& e) {
@@ -226,6 +265,13 @@ Entries read_yaml(std::string_view text) {
       fail("its first line " + excerpt(source.substr(0, end)) + " is not an OpenCV YAML header (expected %YAML:1.0)");
     source[0] = '#';
   }
+  // libyaml checks each %TAG directive against all before it, before the first event:
+  // 60,000 of them in 1 MiB took 9 s.
+  int directives = 0;
+  for (std::size_t i = source.find('%'); i != std::string::npos; i = source.find('%', i + 1))
+    if ((i == 0 || source[i - 1] == '\n') && ++directives > kMaxYamlDirectives)
+      fail("it has more than " + std::to_string(kMaxYamlDirectives) +
+           " lines starting with '%' (YAML directives); an OpenCV YAML file has one, %YAML:1.0");
   YamlEvents events(source);
   events.next();  // stream start
   if (events.next().type == YAML_STREAM_END_EVENT)
@@ -257,7 +303,9 @@ Entries read_yaml(std::string_view text) {
 // ---------------------------------------------------------------------------
 // XML (libxml2)
 
-bool blank(std::string_view s) { return s.find_first_not_of(" \t\r\n") == std::string_view::npos; }
+constexpr ByteSet kBlank(" \t\r\n");
+
+bool blank(std::string_view s) { return find_in(s, 0, kBlank, false) == std::string_view::npos; }
 
 std::string name_of(const xmlNode* node) { return reinterpret_cast<const char*>(node->name); }
 
@@ -265,6 +313,79 @@ void check_xml_depth(const xmlNode* node, int depth) {
   if (depth > kMaxCalibrationDepth) fail(kDepthError);
   for (const xmlNode* c = node->children; c; c = c->next)
     if (c->type == XML_ELEMENT_NODE) check_xml_depth(c, depth + 1);
+}
+
+// A linear pass over the XML before libxml2 parses it. libxml2 compares each attribute of
+// an element with all those before it (150,000 attributes on one element, 1 MiB, did not
+// finish in a minute; 75,000 namespace declarations took 1.2 s), and every node costs it
+// an allocation.
+// This pass counts elements, attributes, comments, processing instructions, CDATA
+// sections and references, and the nesting. What it cannot follow is not well-formed XML
+// and is refused here: libxml2 goes on parsing past an error (only without building the
+// tree), so it must not be handed a file that this pass has not bounded.
+void scan_xml(std::string_view text) {
+  int nodes = 0, depth = 0;
+  auto count = [&](std::size_t n) {
+    if ((nodes += int(std::min<std::size_t>(n, kMaxCalibrationNodes + 1))) > kMaxCalibrationNodes)
+      fail(nodes_error("XML elements, attributes, comments and references"));
+  };
+  auto past = [&](std::size_t from, std::string_view end, const char* what) {
+    const std::size_t at = text.find(end, from);
+    if (at == std::string_view::npos) fail(std::string("it is not valid XML: ") + what + " is not closed");
+    return at + end.size();
+  };
+  auto starts = [&](std::size_t at, std::string_view s) { return text.compare(at, s.size(), s) == 0; };
+  static constexpr ByteSet markup("<&"), tag("\"'=<>"), name_end(" \t\r\n/>"), double_quoted("\"<"),
+      single_quoted("'<");
+  for (std::size_t i = find_in(text, 0, markup); i != std::string_view::npos; i = find_in(text, i, markup)) {
+    if (text[i] == '&') {  // an entity or character reference
+      count(1);
+      ++i;
+    } else if (starts(i, "<!--")) {
+      count(1);
+      i = past(i + 4, "-->", "a comment");
+    } else if (starts(i, "<![CDATA[")) {
+      count(1);
+      i = past(i + 9, "]]>", "a CDATA section");
+    } else if (starts(i, "<?")) {
+      count(1);
+      i = past(i + 2, "?>", "a processing instruction");
+    } else if (starts(i, "<!")) {  // <!DOCTYPE and <!ENTITY are refused before this pass
+      fail("it is not valid XML: it has a declaration (<!) that is not a comment or CDATA section");
+    } else if (starts(i, "</")) {
+      depth = std::max(depth - 1, 0);
+      i = past(i + 2, ">", "an end tag");
+    } else {
+      // A start tag: name, then attributes name="value" or name='value', whose values hold
+      // no '<' (and may hold '>', '=' and references).
+      const std::size_t end = std::min(find_in(text, i + 1, name_end), text.size());
+      const std::string name = "<" + std::string(text.substr(i + 1, std::min<std::size_t>(end - i - 1, 64))) + ">";
+      count(1);
+      int attributes = 0;
+      std::size_t j = i + 1;
+      for (;;) {
+        j = find_in(text, j, tag);
+        if (j == std::string_view::npos || text[j] == '<')
+          fail("it is not valid XML: the start tag " + excerpt(name) + " is not closed");
+        if (text[j] == '>') break;
+        if (text[j] == '=') {
+          if (++attributes > kMaxXmlAttributes)
+            fail("the XML element " + excerpt(name) + " has more than " + std::to_string(kMaxXmlAttributes) +
+                 " attributes; OpenCV writes at most one (type_id)");
+          count(1);
+          ++j;
+          continue;
+        }
+        const std::size_t close = find_in(text, j + 1, text[j] == '"' ? double_quoted : single_quoted);
+        if (close == std::string_view::npos || text[close] == '<')
+          fail("it is not valid XML: an attribute value of " + excerpt(name) + " is not closed or holds '<'");
+        count(std::size_t(std::count(text.begin() + j, text.begin() + close, '&')));
+        j = close + 1;
+      }
+      if (text[j - 1] != '/' && ++depth > kMaxCalibrationDepth) fail(kDepthError);
+      i = j + 1;
+    }
+  }
 }
 
 Value build_xml(const xmlNode* node, Budget& budget) {
@@ -306,11 +427,11 @@ Value build_xml(const xmlNode* node, Budget& budget) {
   // Text: one value, or a list of values separated by white space (matrix data).
   std::vector<std::string_view> tokens;
   const std::string_view all(text);
-  for (std::size_t i = all.find_first_not_of(" \t\r\n"); i != std::string_view::npos;) {
-    const std::size_t end = std::min(all.find_first_of(" \t\r\n", i), all.size());
+  for (std::size_t i = find_in(all, 0, kBlank, false); i != std::string_view::npos;) {
+    const std::size_t end = std::min(find_in(all, i, kBlank), all.size());
     budget.take();
     tokens.push_back(all.substr(i, end - i));
-    i = all.find_first_not_of(" \t\r\n", end);
+    i = find_in(all, end, kBlank, false);
   }
   if (tokens.size() == 1) {
     v.text = std::string(tokens[0]);
@@ -329,9 +450,10 @@ Entries read_xml(std::string_view text) {
   // No document type, so no entity can be declared (no "billion laughs") and no external
   // DTD loaded; the bytes are read as UTF-8 whatever they declare, so this test cannot be
   // dodged by another encoding (UTF-16 and UTF-32 have NUL bytes, refused before).
-  if (text.find("<!DOCTYPE") != std::string_view::npos || text.find("<!ENTITY") != std::string_view::npos)
+  if (contains(text, "<!DOCTYPE") || contains(text, "<!ENTITY"))
     fail("it has an XML document type or entity declaration (<!DOCTYPE, <!ENTITY), which calibration files "
          "may not have");
+  scan_xml(text);
   static std::once_flag init;
   std::call_once(init, [] { xmlInitParser(); });
   const std::unique_ptr<xmlParserCtxt, void (*)(xmlParserCtxtPtr)> context(xmlNewParserCtxt(), xmlFreeParserCtxt);
@@ -404,7 +526,53 @@ Value build_json(const nlohmann::json& j, Budget& budget) {
   return v;
 }
 
+// A linear pass over the JSON before nlohmann-json parses it into a tree: bounds the
+// values and keys (each costs an allocation), the nesting, and the length of numbers (one
+// of a million digits costs strtod milliseconds). The entries that are read are held to
+// their Budget here already, with the same count as build_json (keys and scalars), so
+// that the tree is never larger than the reading would allow.
+void scan_json(std::string_view text) {
+  int nodes = 0, depth = 0;
+  std::optional<Budget> entry;  // inside a top-level entry that is read
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '"') {  // a string, to the first quote not escaped
+      const std::size_t first = i + 1;
+      for (++i; i < text.size() && text[i] != '"'; ++i)
+        if (text[i] == '\\') ++i;
+      const std::size_t next = find_in(text, i + 1, kBlank, false);
+      const bool key = next != std::string_view::npos && text[next] == ':';
+      if (depth == 1 && key) {
+        const std::string name(text.substr(first, std::min(i, text.size()) - first));
+        entry.reset();
+        if (wanted(name)) entry.emplace(name);
+      } else if (entry) {
+        entry->take();
+      }
+    } else if (c == '-' || (c >= '0' && c <= '9')) {
+      static constexpr ByteSet number("0123456789+-.eE");
+      const std::size_t end = std::min(find_in(text, i, number, false), text.size());
+      if (end - i > kMaxNumberChars)
+        fail("it has a number of more than " + std::to_string(kMaxNumberChars) + " characters, " +
+             excerpt(text.substr(i, end - i)));
+      if (entry) entry->take();
+      i = end - 1;
+    } else if (c >= 'a' && c <= 'z') {  // true, false, null
+      if (entry) entry->take();
+      static constexpr ByteSet letters("abcdefghijklmnopqrstuvwxyz");
+      i = std::min(find_in(text, i, letters, false), text.size()) - 1;
+    } else if (c == '}' || c == ']') {
+      if (--depth < 1) entry.reset();
+    } else if (c == '{' || c == '[' || c == ',' || c == ':') {
+      if ((c == '{' || c == '[') && ++depth > kMaxCalibrationDepth) fail(kDepthError);
+      if (c == ',' && depth == 1) entry.reset();
+      if (++nodes > kMaxCalibrationNodes) fail(nodes_error("JSON values and keys"));
+    }
+  }
+}
+
 Entries read_json(std::string_view text) {
+  scan_json(text);
   nlohmann::json doc;
   try {
     // The parser keeps its own stack on the heap; the callback bounds its depth.
@@ -439,6 +607,9 @@ Entries read_json(std::string_view text) {
 double number(const Value& v, const std::string& what) {
   if (v.kind != Value::Kind::scalar) fail(what + " is " + kind_name(v) + ", expected a number");
   const std::string& s = v.text;
+  if (s.size() > kMaxNumberChars)
+    fail(what + " is " + excerpt(s) + ", expected a number (of at most " + std::to_string(kMaxNumberChars) +
+         " characters)");
   std::string lower;
   for (char c : s) lower += char(std::tolower(static_cast<unsigned char>(c)));
   if (!v.is_string &&
@@ -581,6 +752,26 @@ Camera to_camera(const Entries& entries) {
 }
 
 }  // namespace
+
+std::string not_a_regular_file(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) {
+    const int error = errno;
+    struct stat link {};
+    if (error == ENOENT && ::lstat(path.c_str(), &link) == 0 && S_ISLNK(link.st_mode))
+      return "is a symbolic link to a file that does not exist";
+    if (error == ENOENT || error == ENOTDIR) return "does not exist";
+    if (error == ELOOP) return "is a symbolic link loop";
+    return std::string("cannot be reached (") + std::strerror(error) + ")";
+  }
+  if (S_ISREG(st.st_mode)) return "";
+  if (S_ISDIR(st.st_mode)) return "is a directory";
+  if (S_ISFIFO(st.st_mode)) return "is a FIFO";
+  if (S_ISCHR(st.st_mode)) return "is a character device";
+  if (S_ISBLK(st.st_mode)) return "is a block device";
+  if (S_ISSOCK(st.st_mode)) return "is a socket";
+  return "is not a regular file";
+}
 
 Camera read_calibration(std::string_view text) {
   if (text.size() > kMaxCalibrationBytes)

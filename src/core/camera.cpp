@@ -1,12 +1,15 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 #include "lftag/camera.hpp"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <charconv>
 #include <cmath>
-#include <filesystem>
-#include <fstream>
+#include <cstring>
 #include <stdexcept>
-#include <system_error>
 
 #include <opencv2/calib3d.hpp>
 
@@ -21,6 +24,17 @@ std::string show(double v) {
   const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 6);
   return std::string(buf, r.ptr);
 }
+
+// Closes the file it holds when it goes out of scope.
+struct FileDescriptor {
+  explicit FileDescriptor(int f) : fd(f) {}
+  FileDescriptor(const FileDescriptor&) = delete;
+  FileDescriptor& operator=(const FileDescriptor&) = delete;
+  ~FileDescriptor() {
+    if (fd >= 0) ::close(fd);
+  }
+  const int fd;
+};
 
 }  // namespace
 
@@ -40,15 +54,30 @@ Camera Camera::pinhole(double fx, double fy, double cx, double cy, int width, in
 
 Camera Camera::load(const std::string& path) {
   const std::string name = "calibration file '" + path + "'";
-  std::error_code error;
-  if (std::filesystem::is_directory(path, error)) throw std::runtime_error(name + " is a directory, expected a file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error(name + " cannot be opened");
+  // Refused before anything is opened: opening a FIFO waits for a writer (forever, for
+  // one that has none), and opening a device can act on it.
+  if (const std::string problem = detail::not_a_regular_file(path); !problem.empty())
+    throw std::runtime_error(name + " cannot be opened: it " + problem +
+                             (detail::names_a_kind(problem) ? ", expected a regular file" : ""));
+  // Should the path have become a FIFO since, O_NONBLOCK keeps the open from waiting, and
+  // fstat tells what was opened.
+  const FileDescriptor file{::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_NOCTTY | O_CLOEXEC)};
+  const int fd = file.fd;
+  if (fd < 0) throw std::runtime_error(name + " cannot be opened: " + std::strerror(errno));
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode))
+    throw std::runtime_error(name + " cannot be opened: it is not a regular file");
   // One byte more than the limit tells a file that is too big (or endless) from one that fits.
   std::string text(detail::kMaxCalibrationBytes + 1, '\0');
-  in.read(text.data(), std::streamsize(text.size()));
-  if (in.bad()) throw std::runtime_error(name + " cannot be read");
-  text.resize(std::size_t(in.gcount()));
+  std::size_t size = 0;
+  while (size < text.size()) {
+    const ssize_t n = ::read(fd, text.data() + size, text.size() - size);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw std::runtime_error(name + " cannot be read: " + std::strerror(errno));
+    if (n == 0) break;
+    size += std::size_t(n);
+  }
+  text.resize(size);
   if (text.size() > detail::kMaxCalibrationBytes)
     throw std::runtime_error(name + " is larger than the " + std::to_string(detail::kMaxCalibrationBytes) +
                              " bytes (1 MiB) a calibration file may have");

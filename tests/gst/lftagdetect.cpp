@@ -3,6 +3,9 @@
 // reliable size, poses), every caps format, odd sizes and padded strides, shared
 // buffers, the metas downstream, region-of-interest metas, bus messages, property
 // changes while playing, calibration errors and warnings, and the overlay.
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -1076,6 +1079,18 @@ GST_START_TEST(test_bad_calibration_files) {
   const std::string source = "lftagtestsrc num-buffers=3 ! ";
   expect_error(source + "lftagdetect name=d calibration-file=/nonexistent/camera.yml ! fakesink",
                {"/nonexistent/camera.yml", "does not exist"}, GST_RESOURCE_ERROR);
+  // What is no regular file is refused before it is opened (a FIFO without a writer would
+  // block the open), saying what it is.
+  gchar* tmp = g_dir_make_tmp("lftag-calibration-XXXXXX", nullptr);
+  const std::string fifo = std::string(tmp) + "/camera.yml";
+  fail_unless(mkfifo(fifo.c_str(), 0600) == 0);
+  expect_error(source + "lftagdetect name=d calibration-file=" + fifo + " ! fakesink", {fifo, "is a FIFO"},
+               GST_RESOURCE_ERROR);
+  expect_error(source + "lftagdetect name=d calibration-file=" + tmp + " ! fakesink", {tmp, "is a directory"},
+               GST_RESOURCE_ERROR);
+  unlink(fifo.c_str());
+  rmdir(tmp);
+  g_free(tmp);
   expect_error(source + "lftagdetect name=d calibration-file=" + data + "/malformed.yml ! fakesink",
                {data + "/malformed.yml"}, GST_RESOURCE_ERROR);
   expect_error(source + "lftagdetect name=d calibration-file=" + data + "/no_matrix.yml ! fakesink",

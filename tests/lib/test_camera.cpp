@@ -1,4 +1,7 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -279,6 +282,108 @@ TEST(CameraFile, NestingAliasesAndEntitiesAreRefused) {
   // Entities that are not declared are XML errors.
   e = parse_error("<?xml version=\"1.0\"?><opencv_storage><image_width>&x;</image_width></opencv_storage>");
   EXPECT_MENTIONS(e, "not valid XML");
+}
+
+// `text`, then what `item(0)`, `item(1)`... make, as many as fit under 1 MiB with `tail`.
+std::string fill_to_limit(std::string text, const std::function<std::string(int)>& item, const std::string& tail) {
+  for (int i = 0;; ++i) {
+    const std::string next = item(i);
+    if (text.size() + next.size() + tail.size() > (1u << 20)) break;
+    text += next;
+  }
+  return text + tail;
+}
+
+// Distinct short names: a, b, ..., Z, ba, bb, ...
+std::string name_of(int i) {
+  const char* letters = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ";
+  std::string name;
+  do name += letters[i % 52], i /= 52; while (i > 0);
+  return name;
+}
+
+TEST(CameraFile, XmlAttributesAndNestingAreBoundedBeforeLibxml2) {
+  // libxml2 compares each attribute of an element with all those before it: 150,000 on one
+  // element (1 MiB) did not finish in a minute, 75,000 namespace declarations took 1.2 s.
+  // A linear pass before libxml2 refuses more than 8 on one element.
+  const std::string head = "<?xml version=\"1.0\"?>\n<opencv_storage>\n<other";
+  const std::string tail = "/>\n</opencv_storage>\n";
+  const std::string attributes = fill_to_limit(head, [](int i) { return " " + name_of(i) + "=\"\""; }, tail);
+  std::string e = error_within([&] { Camera::parse(attributes, "attributes.xml"); });
+  EXPECT_MENTIONS(e, "attributes.xml: the XML element '<other>' has more than 8 attributes");
+  const std::string namespaces = fill_to_limit(head, [](int i) { return " xmlns:" + name_of(i) + "=\"u\""; }, tail);
+  EXPECT_MENTIONS(error_within([&] { Camera::parse(namespaces, "ns.xml"); }), "has more than 8 attributes");
+  // The attributes OpenCV writes are read.
+  EXPECT_EQ(parse_error(xml_with("<other a=\"1\" b='2' c=\"x=y\"/>\n")), "");
+  // Deep nesting is refused by the same pass (libxml2 stops at 256 levels, after them).
+  std::string deep = "<?xml version=\"1.0\"?><opencv_storage>";
+  for (int i = 0; i < 100000; ++i) deep += "<a>";
+  EXPECT_MENTIONS(parse_error(deep), "nests deeper than 32 levels");
+}
+
+TEST(CameraFile, EveryFormatHasAtMost20000Nodes) {
+  // Every node costs each parser an allocation or two: at most 20,000 in a file.
+  const std::string elements =
+      fill_to_limit(xml_with("").substr(0, xml_with("").size() - 18), [](int) { return "<a/>"; }, "</opencv_storage>\n");
+  EXPECT_MENTIONS(parse_error(elements), "more than 20000 XML elements, attributes, comments and references");
+  const std::string comments =
+      fill_to_limit(xml_with("").substr(0, xml_with("").size() - 18), [](int) { return "<!---->"; }, "</opencv_storage>\n");
+  EXPECT_MENTIONS(parse_error(comments), "more than 20000 XML elements");
+  const std::string keys = fill_to_limit(yaml_with(kGoodK), [](int i) { return name_of(i) + ": 1\n"; }, "");
+  EXPECT_MENTIONS(parse_error(keys), "more than 20000 YAML nodes");
+  const std::string lists = fill_to_limit(yaml_with(kGoodK, "other: ["), [](int) { return "[], "; }, "1]\n");
+  EXPECT_MENTIONS(parse_error(lists), "more than 20000 YAML nodes");
+  const std::string json = json_with("");
+  const std::string json_keys = fill_to_limit(json.substr(0, json.size() - 1),
+                                              [](int i) { return ", \"" + name_of(i) + "\": 1"; }, "}");
+  EXPECT_MENTIONS(parse_error(json_keys), "more than 20000 JSON values and keys");
+  const std::string arrays =
+      fill_to_limit(json.substr(0, json.size() - 1) + ", \"other\": [", [](int) { return "[],"; }, "1]}");
+  EXPECT_MENTIONS(parse_error(arrays), "more than 20000 JSON values and keys");
+  // A calibration with 15,000 values in an entry that is skipped (the image points of 140
+  // views of a 9x6 board) is read in every format.
+  std::string numbers = "0.5";
+  for (int i = 1; i < 15000; ++i) numbers += ", 0.5";
+  EXPECT_EQ(parse_error(yaml_with(kGoodK, "image_points: [ " + numbers + " ]\n")), "");
+  EXPECT_EQ(parse_error(json_with(", \"image_points\": [" + numbers + "]")), "");
+  EXPECT_EQ(parse_error(xml_with("<image_points><data>" + numbers + "</data></image_points>\n")), "");
+}
+
+TEST(CameraFile, YamlDirectivesAndLongNumbersAreBounded) {
+  // libyaml checks each %TAG directive against all before it (60,000 in 1 MiB took 9 s).
+  const std::string tags = fill_to_limit("%YAML:1.0\n", [](int i) { return "%TAG !" + name_of(i) + "! tag:x:\n"; },
+                                         yaml_with(kGoodK).substr(10));
+  EXPECT_MENTIONS(error_within([&] { Camera::parse(tags, "tags.yml"); }),
+                  "tags.yml: it has more than 8 lines starting with '%' (YAML directives)");
+
+  // A number of a million digits: strtod's time, refused from its length.
+  const std::string digits(1 << 19, '1');
+  EXPECT_MENTIONS(parse_error(json_with(", \"other\": 0." + digits)), "it has a number of more than 64 characters");
+  EXPECT_MENTIONS(parse_error(yaml_with(kGoodK, "image_width: " + digits + "\n")),
+                  "'image_width' is '1111111111111111111111111111111111111111...', expected a number (of at most 64 "
+                  "characters)");
+  EXPECT_MENTIONS(parse_error(xml_with("<image_width>" + digits + "</image_width>")),
+                  "expected a number (of at most 64 characters)");
+}
+
+TEST(CameraFile, OnlyRegularFilesAreOpened) {
+  // A FIFO without a writer blocked the open forever; a device is not opened at all.
+  const std::string dir = testing::TempDir() + "/calibration-kinds";
+  ::mkdir(dir.c_str(), 0700);
+  const std::string fifo = dir + "/fifo.yml", loop = dir + "/loop.yml", dangling = dir + "/dangling.yml";
+  std::remove(fifo.c_str()), std::remove(loop.c_str()), std::remove(dangling.c_str());
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  ASSERT_EQ(::symlink(loop.c_str(), loop.c_str()), 0);
+  ASSERT_EQ(::symlink((dir + "/none.yml").c_str(), dangling.c_str()), 0);
+  const std::string name = "calibration file '" + fifo + "'";
+  EXPECT_MENTIONS(error_within([&] { Camera::load(fifo); }), name + " cannot be opened: it is a FIFO, expected a regular file");
+  EXPECT_MENTIONS(error_within([&] { Camera::load(dir); }), "cannot be opened: it is a directory");
+  EXPECT_MENTIONS(error_within([] { Camera::load("/dev/zero"); }),
+                  "calibration file '/dev/zero' cannot be opened: it is a character device");
+  EXPECT_MENTIONS(error_within([&] { Camera::load(loop); }), "cannot be opened: it is a symbolic link loop");
+  EXPECT_MENTIONS(error_within([&] { Camera::load(dangling); }), "is a symbolic link to a file that does not exist");
+  EXPECT_MENTIONS(error_within([&] { Camera::load(dir + "/none.yml"); }), "cannot be opened: it does not exist");
+  std::remove(fifo.c_str()), std::remove(loop.c_str()), std::remove(dangling.c_str()), ::rmdir(dir.c_str());
 }
 
 TEST(CameraFile, SizeLimit) {

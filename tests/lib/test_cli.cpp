@@ -192,6 +192,24 @@ TEST(Cli, DetectReportsUnreadableImagesAndGoesOn) {
   EXPECT_EQ(r.output.find("WARN"), std::string::npos) << r.output;
 }
 
+TEST(Cli, DetectRefusesAJpegWhoseFillBytesHideItsSize) {
+  // SOI, 4,100 fill bytes, then a frame of 32768 x 32768: refused from its header (the
+  // header walk once stopped at 4,096 fill bytes, and OpenCV decoded 1 GB).
+  const std::string fill = kTmp + "/det_fill.jpg";
+  {
+    std::ofstream f(fill, std::ios::binary);
+    f << "\xFF\xD8" << std::string(4100, '\xFF')
+      << std::string("\xFF\xC0\x00\x0B\x08\x80\x00\x80\x00\x01\x01\x11\x00", 13);
+  }
+  const CliResult r = run("detect " + fill);
+  EXPECT_EQ(r.status, 1);
+  const auto lines = json_lines(r.output);
+  ASSERT_EQ(lines.size(), 1u) << r.output;
+  EXPECT_NE(lines[0].value("error", "").find("is 32768x32768 pixels, more than the limit of 100000000"),
+            std::string::npos)
+      << r.output;
+}
+
 TEST(Cli, DetectStatsAndDebugImages) {
   const std::string img = kTmp + "/det_stats.png", dir = kTmp + "/det_debug";
   ASSERT_EQ(run("render --id 77 --output " + img).status, 0);
