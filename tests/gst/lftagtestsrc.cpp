@@ -7,7 +7,9 @@
 #include <string>
 #include <vector>
 
+#include <glib/gstdio.h>
 #include <gst/base/gstbasesrc.h>
+#include <sys/stat.h>
 #include <gst/video/video.h>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -614,6 +616,23 @@ GST_START_TEST(test_bad_settings_fail_the_start)
                "/nonexistent/street.jpg", resource);
   expect_error("lftagtestsrc background=photo background-location=" + data + "/malformed.yml ! fakesink",
                "malformed.yml", resource);
+  // A FIFO nobody writes to is refused at once (opening it would block), and a 4 KB JPEG
+  // whose fill bytes hide a frame of 32768 x 32768 by its size, before it is decoded.
+  gchar* dir = g_dir_make_tmp("lftagtestsrc-XXXXXX", nullptr);
+  fail_unless(dir != nullptr);
+  const std::string fifo = std::string(dir) + "/street.jpg", filled = std::string(dir) + "/filled.jpg";
+  fail_unless(mkfifo(fifo.c_str(), 0600) == 0);
+  expect_error("lftagtestsrc background=photo background-location=" + fifo + " ! fakesink", "FIFO", resource);
+  std::string jpeg = {'\xFF', '\xD8'};
+  jpeg.append(4100, '\xFF');
+  jpeg += std::string("\xFF\xC0\x00\x0B\x08\x80\x00\x80\x00\x01\x01\x11\x00", 13);
+  fail_unless(g_file_set_contents(filled.c_str(), jpeg.data(), gssize(jpeg.size()), nullptr));
+  expect_error("lftagtestsrc background=photo background-location=" + filled + " ! fakesink", "32768x32768",
+               resource);
+  g_unlink(fifo.c_str());
+  g_unlink(filled.c_str());
+  g_rmdir(dir);
+  g_free(dir);
   // A calibration for 640x480 cannot describe a 16:9 frame.
   expect_error("lftagtestsrc calibration-file=" + data + "/opencv_sample.yml ! "
                "video/x-raw,width=1280,height=720 ! fakesink",
