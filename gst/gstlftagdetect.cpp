@@ -54,8 +54,11 @@
  * (a point), "rvec" and "tvec" (3 doubles each: marker frame to camera frame,
  * Rodrigues rotation and metres; the marker frame has its origin at the centre,
  * x right, y down, z into the marker), "tag-size" (metres), "calibrated"
- * (boolean), "decode-error", "edge-score" and "reprojection-error" (doubles).
- * A point is an array of two doubles, in pixels with pixel centres at integers.
+ * (boolean), "decode-error", "worst-cell" (the largest offset of a square from
+ * its decoded place, marker units), "edge-score" and "reprojection-error"
+ * (doubles), and "from-outline" (boolean: read from the grey levels under its
+ * aligned outline, a far or blurred marker; decode-error and worst-cell are then
+ * 0). A point is an array of two doubles, in pixels with pixel centres at integers.
  *
  * Poses need the camera: #GstLFTagDetect:calibration-file (OpenCV YAML, XML or
  * JSON, scaled to the frame when it records its own frame size) or
