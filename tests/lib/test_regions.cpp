@@ -123,8 +123,9 @@ Labelled label(const cv::Mat1b& black, RegionLabeller* reuse = nullptr) {
       }
     }
     // Its children are a slice of the children array.
-    EXPECT_GE(g.first_child, 0) << "region " << r;
-    EXPECT_LE(g.first_child + g.child_count, int(t.children.size())) << "region " << r;
+    const std::ptrdiff_t first_child = t.children_of(r) - t.children.data();
+    EXPECT_GE(first_child, 0) << "region " << r;
+    EXPECT_LE(first_child + g.child_count, std::ptrdiff_t(t.children.size())) << "region " << r;
     for (int i = 0; i < g.child_count; ++i) EXPECT_EQ(t.regions[t.children_of(r)[i]].parent, r);
     child_total += g.child_count;
   }
