@@ -21,14 +21,6 @@
 namespace lftag::detail {
 namespace {
 
-// A buffer kept from frame to frame for `need` elements; released first when it holds
-// more than four times that, so that one hostile frame leaves no gigabytes behind.
-template <class T>
-void reserve_for_frame(std::vector<T>& v, std::size_t need) {
-  if (v.capacity() > 4 * need + (std::size_t{1} << 16) / sizeof(T)) std::vector<T>().swap(v);
-  v.reserve(need);
-}
-
 template <class T>
 std::size_t capacity_bytes(const std::vector<T>& v) {
   return v.capacity() * sizeof(T);

@@ -41,6 +41,14 @@
 namespace lftag::detail {
 
 // ---------------------------------------------------------------- threshold.cpp
+// A buffer kept from frame to frame, made ready for `need` elements; released first when
+// it holds more than four times that, so that one hostile frame leaves no gigabytes behind.
+template <class T>
+void reserve_for_frame(std::vector<T>& v, std::size_t need) {
+  if (v.capacity() > 4 * need + (std::size_t{1} << 16) / sizeof(T)) std::vector<T>().swap(v);
+  v.reserve(need);
+}
+
 // One bit per pixel, set for black, rows padded to whole 64-bit words (padding is white).
 struct BinaryImage {
   int width = 0, height = 0, words_per_row = 0;
