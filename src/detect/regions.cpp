@@ -11,7 +11,7 @@
 // keeps the smaller number, so every region keeps the label of its first pixel, and with
 // it the right parent.
 //
-// Memory: the runs and an upper bound on the labels are counted before the labelling, so
+// Memory: the runs and the labels they make are counted before the labelling, so
 // every buffer is reserved once, at its size; the labels are the tree's regions, numbered
 // down in place at the end; a run is the 4-byte number of its region.
 #include <stdexcept>
@@ -24,6 +24,48 @@ namespace {
 template <class T>
 std::size_t capacity_bytes(const std::vector<T>& v) {
   return v.capacity() * sizeof(T);
+}
+
+// The pixels of word i of a row `w` pixels wide (its padding cleared).
+std::uint64_t valid_bits(int w, int i) {
+  const int left = w - 64 * i;
+  return left >= 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << left) - 1;
+}
+
+// The runs of one colour (their first pixels in `colour_starts`) that hold a pixel of
+// `touch`, 64 pixels at a time: a carry set off just past each start that is not itself
+// touching runs over the pixels that are neither starts nor touching, and stops on the
+// first that is: a touching pixel for a touched run, the next start for an untouched one.
+// `carry` and `seed` cross to the next word of the row.
+int touched_runs(std::uint64_t colour_starts, std::uint64_t touch, std::uint64_t& carry, std::uint64_t& seed) {
+  const std::uint64_t stops = colour_starts | touch, pass = ~stops, from = colour_starts & ~touch;
+  const std::uint64_t seeds = (from << 1) | seed;
+  seed = from >> 63;
+  const unsigned __int128 sum = static_cast<unsigned __int128>(pass) + (seeds & pass) + carry;
+  carry = std::uint64_t(sum >> 64);
+  const std::uint64_t first_stop = (std::uint64_t(sum) & stops) | (seeds & stops);
+  return count_bits(colour_starts & touch) + count_bits(first_stop & touch & ~colour_starts);
+}
+
+// Of the `runs` of a row, those that no run of their colour in the row above touches (black runs
+// 4-connected: a black pixel above one of theirs; white ones 8-connected: a white pixel
+// above one of theirs or diagonally).
+std::size_t untouched_runs(const std::uint64_t* row, const std::uint64_t* above, const std::uint64_t* starts, int w,
+                           int wpr, std::size_t runs) {
+  std::size_t touched = 0;
+  std::uint64_t carry[2] = {}, seed[2] = {};
+  for (int i = 0; i < wpr; ++i) {
+    if (!starts[i] && !(carry[0] | carry[1] | seed[0] | seed[1])) continue;  // inside a run: nothing to count
+    const std::uint64_t valid = valid_bits(w, i), black = row[i], white = ~black & valid;
+    const std::uint64_t white_above = ~above[i] & valid;
+    const std::uint64_t white_above_left = i > 0 ? ~above[i - 1] >> 63 : 0;  // only the last word has padding
+    const std::uint64_t white_above_right = i + 1 < wpr ? ~above[i + 1] & valid_bits(w, i + 1) & 1 : 0;
+    const std::uint64_t near_white = white_above | (white_above << 1) | white_above_left | (white_above >> 1) |
+                                     (white_above_right << 63);
+    touched += std::size_t(touched_runs(starts[i] & black, black & above[i], carry[0], seed[0]));
+    touched += std::size_t(touched_runs(starts[i] & white, white & near_white, carry[1], seed[1]));
+  }
+  return runs - touched;
 }
 
 // Provisional labels with their statistics so far, stored as regions: child_count holds
@@ -78,37 +120,30 @@ void RegionLabeller::label(const BinaryImage& bin, RegionTree& tree) {
   tree.width = w, tree.words_per_row = wpr;
 
   // Where runs start, 64 pixels at a time: where a pixel's colour differs from its left
-  // neighbour's, and at x = 0. A run makes a label only when no run of its colour touches
-  // it from the row above, so the labels are at most the runs whose first pixel has
-  // another colour above it (and above its left neighbour, for white).
+  // neighbour's, and at x = 0. Then the labels: a run makes one when no run of its colour
+  // in the row above touches it.
   const std::size_t words = std::size_t(wpr) * h;
   reserve_for_frame(tree.starts, words);
   reserve_for_frame(tree.runs_before, words + 1);
   tree.starts.resize(words);
   tree.runs_before.resize(words + 1);
-  std::size_t total = 0, most_labels = 1;  // the frame's
+  std::size_t total = 0, labels_made = 1;  // the frame's
+  const std::uint64_t last_valid = wpr > 0 ? valid_bits(w, wpr - 1) : 0;
   for (int y = 0; y < h; ++y) {
     const std::uint64_t* row = bin.row(y);
-    const std::uint64_t* above = y > 0 ? bin.row(y - 1) : nullptr;
-    std::uint64_t carry = 0, above_carry = 1;  // white left of the image; black above-left, for the bound
+    std::uint64_t* starts = tree.starts.data() + std::size_t(y) * wpr;
+    std::uint64_t carry = 0;  // white left of the image
     for (int i = 0; i < wpr; ++i) {
       const std::uint64_t word = row[i];
       std::uint64_t s = word ^ ((word << 1) | carry);
       carry = word >> 63;
       if (i == 0) s |= 1;
-      if (i == wpr - 1 && (w & 63)) s &= (std::uint64_t{1} << (w & 63)) - 1;  // padding
-      const std::size_t at = std::size_t(y) * wpr + i;
-      tree.starts[at] = s;
-      tree.runs_before[at] = int(total);
-      total += std::size_t(__builtin_popcountll(s));
-      if (!above) {
-        most_labels += std::size_t(__builtin_popcountll(s));
-        continue;
-      }
-      const std::uint64_t a = above[i];
-      most_labels += std::size_t(__builtin_popcountll(s & ((word & ~a) | (~word & a & ((a << 1) | above_carry)))));
-      above_carry = a >> 63;
+      starts[i] = i < wpr - 1 ? s : s & last_valid;
+      tree.runs_before[std::size_t(y) * wpr + i] = int(total);
+      if (starts[i]) total += std::size_t(count_bits(starts[i]));
     }
+    const std::size_t row_runs = total - (wpr > 0 ? std::size_t(tree.runs_before[std::size_t(y) * wpr]) : 0);
+    labels_made += y == 0 ? row_runs : untouched_runs(row, bin.row(y - 1), starts, w, wpr, row_runs);
     if (total >= std::size_t(1) << 30)
       throw std::length_error("the binary image has 2^30 runs or more: too large to label");
   }
@@ -116,7 +151,7 @@ void RegionLabeller::label(const BinaryImage& bin, RegionTree& tree) {
 
   reserve_for_frame(tree.runs, total);
   tree.runs.resize(total);
-  reserve_for_frame(tree.regions, most_labels);
+  reserve_for_frame(tree.regions, labels_made);
   tree.regions.clear();
   for (std::vector<int>& x : row_x_) reserve_for_frame(x, std::size_t(w) + 1);
   Labels labels(tree.regions);
