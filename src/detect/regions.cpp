@@ -13,7 +13,11 @@
 //
 // Memory: the runs and the labels they make are counted before the labelling, so
 // every buffer is reserved once, at its size; the labels are the tree's regions, numbered
-// down in place at the end; a run is the 4-byte number of its region.
+// down in place at the end; a run is the 4-byte number of its region. No two neighbouring
+// runs both make a label (a black run needs white above it, a white one black above it
+// and beside it), so below the first row there is at most a label for every other pixel,
+// as well as at most a run for every pixel: the 1-px checkerboard, which has both, is the
+// worst case, 4 + 28 / 2 bytes a pixel, and 2.4 more for the children and the starts.
 #include <stdexcept>
 
 #include "stages.hpp"
@@ -158,7 +162,8 @@ void RegionLabeller::label(const BinaryImage& bin, RegionTree& tree) {
   labels.create(false, -1, 0);  // the white frame around the image: its box grows from nothing
   tree.regions[kFrame].y0 = 1 << 30;
 
-  std::vector<int>*above_x = &row_x_[0], *this_x = &row_x_[1];
+  std::vector<int>* above_x = &row_x_[0];
+  std::vector<int>* this_x = &row_x_[1];
   int prev_begin = 0, prev_count = 0;  // the row above's runs, in tree.runs
   bool prev_first_black = false;
   for (int y = 0; y < h; ++y) {
@@ -245,7 +250,7 @@ void RegionLabeller::label(const BinaryImage& bin, RegionTree& tree) {
   tree.children.assign(std::size_t(std::max(n - 1, 0)), 0);
   for (int r = 1; r < n; ++r) {
     const int p = regions[r].parent, count = regions[p].child_count;
-    int* group = tree.children.data() + (tree.children_of(p) - tree.children.data());
+    int* group = tree.children.data() + tree.first_child(p);
     int& placed = group[count - 1];
     if (placed == count - 1) {
       placed = r;

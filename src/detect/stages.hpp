@@ -42,10 +42,11 @@ namespace lftag::detail {
 
 // ---------------------------------------------------------------- threshold.cpp
 // A buffer kept from frame to frame, made ready for `need` elements; released first when
-// it holds more than four times that, so that one hostile frame leaves no gigabytes behind.
+// it holds over four times that and a megabyte more, so that one hostile frame leaves no
+// gigabytes behind, and second looks' patches of all sizes still reuse theirs.
 template <class T>
 void reserve_for_frame(std::vector<T>& v, std::size_t need) {
-  if (v.capacity() > 4 * need + (std::size_t{1} << 16) / sizeof(T)) std::vector<T>().swap(v);
+  if (v.capacity() > 4 * need + (std::size_t{1} << 20) / sizeof(T)) std::vector<T>().swap(v);
   v.reserve(need);
 }
 
@@ -85,7 +86,7 @@ struct Region {
   int parent = -1;  // enclosing region (-1 for the frame)
   int area = 0;
   int x0 = 0, y0 = 0, x1 = 0;  // bounding box, inclusive, with y1
-  int y1 : 31;
+  int y1 : 31;                 // beside `black` (a frame has under 2^30 rows: RegionLabeller)
   bool black : 1;
   int child_count = 0;  // RegionTree::children_of
   Region() : y1(0), black(false) {}
@@ -98,8 +99,8 @@ struct Region {
 //
 // Its runs (horizontal runs of one colour, row by row, left to right) keep only their
 // regions: a run starts where `starts` has a bit and ends where the next one starts or at
-// the row's end. A 1-px checkerboard, the worst case, takes 20.5 bytes a pixel in all
-// (bytes_reserved), a photo about 1.
+// the row's end. A 1-px checkerboard, the worst case (regions.cpp), takes 20.5 bytes a
+// pixel in all (bytes_reserved), sensor noise 6, a photo under 1.
 struct RegionTree {
   std::vector<Region> regions;
   std::vector<int> children;  // region by region, each region's in raster order
@@ -107,16 +108,17 @@ struct RegionTree {
   std::vector<std::uint64_t> starts;  // bit x of row y (words_per_row words a row): a run starts at x
   std::vector<int> runs_before;       // for each word of `starts`, the runs that start before it
   std::vector<int> runs;              // the region of each run
-  std::vector<int> child_base;        // children_of(r) for r = 8k: children[child_base[k]]
+  std::vector<int> child_base;        // first_child(8k) for each k
   static constexpr int kFrame = 0;
 
-  // The children of r, children_of(r)[0 .. child_count - 1]: after those of the regions
-  // before it, counted from the last multiple of 8.
-  const int* children_of(int r) const {
+  // The children of r, children_of(r)[0 .. child_count - 1], come after those of the
+  // regions before it: counted from the last multiple of 8.
+  int first_child(int r) const {
     int first = child_base[r >> 3];
     for (int q = r & ~7; q < r; ++q) first += regions[q].child_count;
-    return children.data() + first;
+    return first;
   }
+  const int* children_of(int r) const { return children.data() + first_child(r); }
 
   std::size_t bytes_reserved() const;
 
@@ -151,8 +153,8 @@ struct RegionTree {
 };
 
 // Single-pass labelling over runs with union-find. The provisional labels live in the
-// tree's own regions (the region of each label's root is at most the label), so the
-// buffers are the tree's, kept between frames.
+// tree's regions and become them in place, so the buffers are the tree's, kept between
+// frames. A binary image of 2^30 runs or more is refused (std::length_error).
 class RegionLabeller {
  public:
   void label(const BinaryImage& binary, RegionTree& tree);

@@ -123,9 +123,8 @@ Labelled label(const cv::Mat1b& black, RegionLabeller* reuse = nullptr) {
       }
     }
     // Its children are a slice of the children array.
-    const std::ptrdiff_t first_child = t.children_of(r) - t.children.data();
-    EXPECT_GE(first_child, 0) << "region " << r;
-    EXPECT_LE(first_child + g.child_count, std::ptrdiff_t(t.children.size())) << "region " << r;
+    EXPECT_GE(t.first_child(r), 0) << "region " << r;
+    EXPECT_LE(t.first_child(r) + g.child_count, int(t.children.size())) << "region " << r;
     for (int i = 0; i < g.child_count; ++i) EXPECT_EQ(t.regions[t.children_of(r)[i]].parent, r);
     child_total += g.child_count;
   }
@@ -645,8 +644,9 @@ TEST(Regions, CheckerboardTakesAtMostTwentyBytesAPixel) {
   t.for_each_run(kFrame, [&](int, int x0, int x1) { frame_runs += x1 - x0 == 1; });
   EXPECT_EQ(frame_runs, std::size_t(w) * h / 2);
 
-  // A plain frame after it: the checkerboard's buffers are let go, not kept for good.
+  // A plain frame after it: the checkerboard's 82 MB are let go, but for buffers of about
+  // a megabyte (kept for the second looks' patches).
   labeller.label(from_mat(cv::Mat1b(480, 640, uchar(0))), t);
-  EXPECT_LT(t.bytes_reserved() + labeller.bytes_reserved(), std::size_t(1) << 20);
+  EXPECT_LT(t.bytes_reserved() + labeller.bytes_reserved(), std::size_t(4) << 20);
   EXPECT_EQ(t.regions.size(), 1u);
 }
