@@ -123,8 +123,8 @@ Labelled label(const cv::Mat1b& black, RegionLabeller* reuse = nullptr) {
       }
     }
     // Its children are a slice of the children array.
-    EXPECT_GE(g.first_child, 0) << "region " << r;
-    EXPECT_LE(g.first_child + g.child_count, int(t.children.size())) << "region " << r;
+    EXPECT_GE(t.first_child(r), 0) << "region " << r;
+    EXPECT_LE(t.first_child(r) + g.child_count, int(t.children.size())) << "region " << r;
     for (int i = 0; i < g.child_count; ++i) EXPECT_EQ(t.regions[t.children_of(r)[i]].parent, r);
     child_total += g.child_count;
   }
@@ -603,4 +603,50 @@ TEST(Regions, RandomImagesMatchAFloodFillReference) {
     if (::testing::Test::HasFailure()) return;
   }
   EXPECT_GT(images, 3000);
+}
+
+// The worst case for memory: a 1-px checkerboard, a run at every pixel and a region at every
+// other (each black pixel is a 4-connected region of its own; the white is the frame).
+// The labelling's buffers, from their capacities: at most the 20.5 bytes a pixel that
+// the README states (they were about 55).
+TEST(Regions, CheckerboardTakesAtMostTwentyBytesAPixel) {
+  const int w = 2000, h = 2000;
+  BinaryImage binary;
+  binary.width = w, binary.height = h, binary.words_per_row = (w + 63) / 64;
+  binary.bits.assign(std::size_t(binary.words_per_row) * h, 0);
+  for (int y = 0; y < h; ++y)
+    for (int x = y & 1; x < w; x += 2) binary.bits[std::size_t(y) * binary.words_per_row + (x >> 6)] |= std::uint64_t{1} << (x & 63);
+  RegionLabeller labeller;
+  RegionTree t;
+  labeller.label(binary, t);
+  const double per_pixel = double(t.bytes_reserved() + labeller.bytes_reserved()) / (double(w) * h);
+  EXPECT_LE(per_pixel, 20.5);
+
+  // The tree is still right: the frame and every black pixel alone, in raster order.
+  ASSERT_EQ(t.regions.size(), std::size_t(w) * h / 2 + 1);
+  EXPECT_EQ(t.runs.size(), std::size_t(w) * h);
+  EXPECT_EQ(t.regions[kFrame].area, w * h / 2);
+  EXPECT_EQ(t.regions[kFrame].child_count, w * h / 2);
+  const int* children = t.children_of(kFrame);
+  for (int r = 1; r < int(t.regions.size()); ++r) {
+    const Region& g = t.regions[r];
+    const int x = 2 * ((r - 1) % (w / 2)) + ((r - 1) / (w / 2) & 1), y = (r - 1) / (w / 2);
+    ASSERT_TRUE(g.black && g.area == 1 && g.parent == kFrame && g.child_count == 0) << "region " << r;
+    ASSERT_EQ(cv::Vec4i(g.x0, g.y0, g.x1, g.y1), cv::Vec4i(x, y, x, y)) << "region " << r;
+    ASSERT_EQ(children[r - 1], r);
+  }
+  for (const int r : {1, 2, w / 2 + 1, int(t.regions.size()) - 1}) {
+    const std::vector<RowRun> runs = runs_of(t, r);
+    ASSERT_EQ(runs.size(), 1u);
+    EXPECT_EQ(cv::Vec3i(runs[0].y, runs[0].x0, runs[0].x1), cv::Vec3i(t.regions[r].y0, t.regions[r].x0, t.regions[r].x0 + 1));
+  }
+  std::size_t frame_runs = 0;
+  t.for_each_run(kFrame, [&](int, int x0, int x1) { frame_runs += x1 - x0 == 1; });
+  EXPECT_EQ(frame_runs, std::size_t(w) * h / 2);
+
+  // A plain frame after it: the checkerboard's 82 MB are let go, but for buffers of about
+  // a megabyte (kept for the second looks' patches).
+  labeller.label(from_mat(cv::Mat1b(480, 640, uchar(0))), t);
+  EXPECT_LT(t.bytes_reserved() + labeller.bytes_reserved(), std::size_t(4) << 20);
+  EXPECT_EQ(t.regions.size(), 1u);
 }
