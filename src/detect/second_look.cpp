@@ -269,10 +269,20 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
         parent[find_root(parent, strip[j])] = find_root(parent, strip[i]);
       }
     }
-  std::vector<Cluster> clusters(small.size(), Cluster{1 << 30, 1 << 30, -1, -1, 0, 0});
+  // Each cluster's box, ink, pieces and flags, by its root. A region alone is its own
+  // cluster (most of a noisy frame's regions are), so only clusters of two regions or
+  // more are gathered apart: a frame of specks needs no second copy of `small`.
+  std::vector<int> gathered(small.size(), -1);  // by root: into `joined`; -1 for a region alone
+  std::vector<Cluster> joined;
   for (std::size_t i = 0; i < small.size(); ++i) {
+    const int root = find_root(parent, int(i));
+    if (root == int(i)) continue;
+    if (gathered[root] < 0) {
+      gathered[root] = int(joined.size());
+      joined.push_back(small[root]);
+    }
     const Cluster& g = small[i];
-    Cluster& c = clusters[find_root(parent, int(i))];
+    Cluster& c = joined[gathered[root]];
     c.x0 = std::min(c.x0, g.x0), c.y0 = std::min(c.y0, g.y0);
     c.x1 = std::max(c.x1, g.x1), c.y1 = std::max(c.y1, g.y1);
     c.ink += g.ink;
@@ -280,6 +290,23 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     c.larger_marker = c.larger_marker || g.larger_marker;
     c.smaller_marker = c.smaller_marker || g.smaller_marker;
   }
+  const auto cluster_of = [&](int root) -> const Cluster& {
+    return gathered[root] < 0 ? small[root] : joined[gathered[root]];
+  };
+  // The regions of each cluster, by root (a counting sort of `small` by root): made the
+  // first time a hull is needed.
+  std::vector<int> member_start, members;
+  const auto members_of = [&](int root) {
+    if (member_start.empty()) {
+      member_start.assign(small.size() + 1, 0);
+      for (std::size_t k = 0; k < small.size(); ++k) ++member_start[find_root(parent, int(k)) + 1];
+      for (std::size_t k = 0; k < small.size(); ++k) member_start[k + 1] += member_start[k];
+      members.resize(small.size());
+      std::vector<int> next(member_start.begin(), member_start.end() - 1);
+      for (std::size_t k = 0; k < small.size(); ++k) members[next[find_root(parent, int(k))]++] = small[k].region;
+    }
+    return std::vector<int>(members.begin() + member_start[root], members.begin() + member_start[root + 1]);
+  };
 
   std::vector<std::pair<double, cv::Rect>> found;  // ring ink, box
   // A marker's size, a square seen at up to about 70 degrees.
@@ -306,11 +333,9 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
   const auto overlaps_any = [](const cv::Rect& box, const std::vector<cv::Rect>& boxes) {
     return std::any_of(boxes.begin(), boxes.end(), [&](const cv::Rect& t) { return (t & box).area() > 0; });
   };
-  // The regions of each cluster, by its root: filled the first time a hull is needed.
-  std::vector<std::vector<int>> members;
   for (std::size_t i = 0; i < small.size(); ++i) {
     if (find_root(parent, int(i)) != int(i)) continue;
-    const Cluster& c = clusters[i];
+    const Cluster& c = cluster_of(int(i));
     const int w = c.x1 - c.x0 + 1, h = c.y1 - c.y0 + 1;
     // A marker's size, like a marker in ink and in pieces (4 at least; the markers measured
     // had 5 or more), and alone
@@ -320,13 +345,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const double ring = ring_ink(binary, c);
     if (ring > 0.25) continue;
     const cv::Rect box(c.x0, c.y0, w, h);
-    const auto hull = [&] {
-      if (members.empty()) {
-        members.resize(small.size());
-        for (std::size_t k = 0; k < small.size(); ++k) members[find_root(parent, int(k))].push_back(small[k].region);
-      }
-      return region_hull(tree, members[i]);
-    };
+    const auto hull = [&] { return region_hull(tree, members_of(int(i))); };
     if (!overlaps_any(box, taken) && !resolved(box, hull, c.smaller_marker)) found.emplace_back(ring, box);
   }
   // A marker's border closed around a white hole that holds some of its squares, the
@@ -380,7 +399,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     const Cluster& seed = small[i];
     const int w = seed.x1 - seed.x0 + 1, h = seed.y1 - seed.y0 + 1;
     if (!marker_sized(w, h) || std::max(w, h) >= look.enlarge_below || seed.larger_marker) continue;
-    const Cluster& whole = clusters[find_root(parent, int(i))];
+    const Cluster& whole = cluster_of(find_root(parent, int(i)));
     if (whole.x0 == seed.x0 && whole.y0 == seed.y0 && whole.x1 == seed.x1 && whole.y1 == seed.y1) continue;
     const cv::Rect box(seed.x0, seed.y0, w, h);
     if (overlaps_any(box, taken) ||
