@@ -53,6 +53,15 @@
  *                                   position, marker units (0.35 is the limit)
  *   edge-score         gdouble      mean gradient along the inner border edge
  *   reprojection-error gdouble      RMS of the final pose over the centroids, pixels
+ *   alternative-rvec, alternative-tvec
+ *                      3 gdouble    the planar pose's other solution (IPPE finds two),
+ *                                   refined like the first (the flip of a marker seen
+ *                                   nearly face on)
+ *   alternative-reprojection-error
+ *                      gdouble      its RMS over the centroids, pixels
+ *   ambiguity-ratio    gdouble      alternative-reprojection-error over
+ *                                   reprojection-error: near 1 the pose is ambiguous,
+ *                                   from about 3 settled; 0 without a second solution
  *   from-outline       gboolean     read from the grey levels under its aligned outline
  *                                   (far or blurred; decode-error and worst-cell are 0)
  * Truth only:
@@ -102,6 +111,10 @@ G_BEGIN_DECLS
 #define LFTAG_FIELD_EDGE_SCORE "edge-score"
 #define LFTAG_FIELD_FROM_OUTLINE "from-outline"
 #define LFTAG_FIELD_REPROJECTION_ERROR "reprojection-error"
+#define LFTAG_FIELD_AMBIGUITY_RATIO "ambiguity-ratio"
+#define LFTAG_FIELD_ALTERNATIVE_RVEC "alternative-rvec"
+#define LFTAG_FIELD_ALTERNATIVE_TVEC "alternative-tvec"
+#define LFTAG_FIELD_ALTERNATIVE_REPROJECTION_ERROR "alternative-reprojection-error"
 #define LFTAG_FIELD_CENTERS "centers"
 #define LFTAG_FIELD_FULLY_VISIBLE "fully-visible"
 #define LFTAG_FIELD_EDGE_PX "edge-px"

@@ -233,6 +233,10 @@ GstStructure* detection_structure(const Detection& d) {
                     LFTAG_FIELD_WORST_CELL, G_TYPE_DOUBLE, d.worst_cell, LFTAG_FIELD_EDGE_SCORE, G_TYPE_DOUBLE,
                     d.edge_score, LFTAG_FIELD_FROM_OUTLINE, G_TYPE_BOOLEAN, gboolean(d.from_outline),
                     LFTAG_FIELD_REPROJECTION_ERROR, G_TYPE_DOUBLE, d.reprojection_error, nullptr);
+  set_vec3(s, LFTAG_FIELD_ALTERNATIVE_RVEC, d.alternative_rvec);
+  set_vec3(s, LFTAG_FIELD_ALTERNATIVE_TVEC, d.alternative_tvec);
+  gst_structure_set(s, LFTAG_FIELD_ALTERNATIVE_REPROJECTION_ERROR, G_TYPE_DOUBLE, d.alternative_reprojection_error,
+                    LFTAG_FIELD_AMBIGUITY_RATIO, G_TYPE_DOUBLE, d.ambiguity_ratio, nullptr);
   return s;
 }
 
@@ -298,6 +302,13 @@ Detection detection_from_structure(const GstStructure* s) {
   gboolean from_outline = FALSE;  // optional, as worst-cell
   if (gst_structure_get_boolean(s, LFTAG_FIELD_FROM_OUTLINE, &from_outline)) d.from_outline = from_outline;
   d.reprojection_error = get_double(s, LFTAG_FIELD_REPROJECTION_ERROR);
+  // Optional, as worst-cell: structures from before they were added have no second pose.
+  if (gst_structure_has_field(s, LFTAG_FIELD_ALTERNATIVE_RVEC)) {
+    d.alternative_rvec = get_vec3(s, LFTAG_FIELD_ALTERNATIVE_RVEC);
+    d.alternative_tvec = get_vec3(s, LFTAG_FIELD_ALTERNATIVE_TVEC);
+    d.alternative_reprojection_error = get_double(s, LFTAG_FIELD_ALTERNATIVE_REPROJECTION_ERROR);
+    d.ambiguity_ratio = get_double(s, LFTAG_FIELD_AMBIGUITY_RATIO);
+  }
   return d;
 }
 

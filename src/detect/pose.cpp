@@ -1,8 +1,10 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
-// Final pose (paper IV-I): PnP on all n^2 centroids, IPPE then Levenberg-Marquardt.
-// A blob's centroid is the centroid of its projected square, which perspective moves off
+// Final pose (paper IV-I): PnP on all n^2 centroids, IPPE then Levenberg-Marquardt, for
+// both of IPPE's solutions; the one that fits best is the pose, the other is reported
+// with it. A blob's centroid is the centroid of its projected square, which perspective moves off
 // the projection of the square's centre; one correction with the first pose removes
 // that bias before the refinement.
+#include <algorithm>
 #include <cmath>
 
 #include <opencv2/calib3d.hpp>
@@ -11,6 +13,31 @@
 #include "stages.hpp"
 
 namespace lftag::detail {
+namespace {
+
+// A pose refined on the centroids, with the observations it was refined against (moved
+// from the centroids of the projected squares to the projections of their centres) and
+// its RMS reprojection error over them.
+struct Solution {
+  cv::Vec3d rvec, tvec;
+  std::vector<cv::Point2d> observed;
+  double rms = 0;
+};
+
+double rms_error(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& image, const cv::Vec3d& rvec,
+                 const cv::Vec3d& tvec, const cv::Matx33d& k) {
+  std::vector<cv::Point2d> reprojected;
+  cv::projectPoints(object, rvec, tvec, k, cv::noArray(), reprojected);
+  double sq = 0;
+  for (std::size_t i = 0; i < image.size(); ++i) {
+    const cv::Point2d e = reprojected[i] - image[i];
+    sq += e.dot(e);
+  }
+  return std::sqrt(sq / double(image.size()));
+}
+
+}  // namespace
+
 bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,
                    Detection& out) {
   const Family& f = c.family;
@@ -25,41 +52,56 @@ bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, 
     squares.push_back(f.square(g, digit));
   }
   const cv::Matx33d k = camera.matrix();  // the points are undistorted already
-  cv::Vec3d rvec, tvec;
-  try {
-    if (!cv::solvePnP(object, image, k, cv::noArray(), rvec, tvec, false, cv::SOLVEPNP_IPPE)) return false;
+  std::vector<cv::Point3d> corners;
+  for (const UnitRect& s : squares)
+    for (const cv::Point2d u : {cv::Point2d(s.x, s.y), cv::Point2d(s.x + s.width, s.y),
+                                cv::Point2d(s.x + s.width, s.y + s.height), cv::Point2d(s.x, s.y + s.height)})
+      corners.push_back(f.to_marker_frame(u, size));
+  // Each of IPPE's solutions, refined: each observation moved from the centroid of the
+  // projected square to the projection of its centre, as that solution predicts (the bias
+  // is small beside the pose's error, so the first pose is good enough for it), then
+  // Levenberg-Marquardt on all n^2 points.
+  const auto refine = [&](cv::Vec3d rvec, cv::Vec3d tvec) {
+    Solution s{rvec, tvec, image, 0};
     if (params.refine_pose) {
-      // Move each observation from the centroid of the projected square to the
-      // projection of its centre, as the IPPE pose predicts (the bias is small beside
-      // the pose's error, so the first pose is good enough for it), and refine.
-      std::vector<cv::Point3d> corners;
-      for (const UnitRect& s : squares)
-        for (const cv::Point2d u : {cv::Point2d(s.x, s.y), cv::Point2d(s.x + s.width, s.y),
-                                    cv::Point2d(s.x + s.width, s.y + s.height), cv::Point2d(s.x, s.y + s.height)})
-          corners.push_back(f.to_marker_frame(u, size));
-      std::vector<cv::Point2d> centres, quads, corrected = image;
+      std::vector<cv::Point2d> centres, quads;
       cv::projectPoints(object, rvec, tvec, k, cv::noArray(), centres);
       cv::projectPoints(corners, rvec, tvec, k, cv::noArray(), quads);
       for (int g = 0; g < f.cell_count(); ++g) {
         const std::vector<cv::Point2d> quad(quads.begin() + 4 * g, quads.begin() + 4 * g + 4);
-        corrected[g] -= polygon_centroid(quad) - centres[g];
+        s.observed[g] -= polygon_centroid(quad) - centres[g];
       }
-      cv::solvePnPRefineLM(object, corrected, k, cv::noArray(), rvec, tvec);
-      image = corrected;
+      cv::solvePnPRefineLM(object, s.observed, k, cv::noArray(), s.rvec, s.tvec);
+    }
+    s.rms = rms_error(object, s.observed, s.rvec, s.tvec, k);
+    return s;
+  };
+  std::vector<Solution> solutions;
+  try {
+    std::vector<cv::Mat> rvecs, tvecs;
+    cv::solvePnPGeneric(object, image, k, cv::noArray(), rvecs, tvecs, false, cv::SOLVEPNP_IPPE);
+    for (std::size_t i = 0; i < rvecs.size(); ++i) {
+      Solution s = refine(cv::Vec3d(rvecs[i]), cv::Vec3d(tvecs[i]));
+      // In front of the camera, or no pose at all.
+      if (std::isfinite(s.tvec[2]) && s.tvec[2] > 0 && std::isfinite(s.rms)) solutions.push_back(std::move(s));
     }
   } catch (const cv::Exception&) {
     return false;  // a degenerate point set: not a marker we can localise
   }
-  if (!std::isfinite(tvec[2]) || tvec[2] <= 0) return false;
-
-  std::vector<cv::Point2d> reprojected;
-  cv::projectPoints(object, rvec, tvec, k, cv::noArray(), reprojected);
-  double sq = 0;
-  for (std::size_t i = 0; i < image.size(); ++i) {
-    const cv::Point2d e = reprojected[i] - image[i];
-    sq += e.dot(e);
+  if (solutions.empty()) return false;
+  std::stable_sort(solutions.begin(), solutions.end(),
+                   [](const Solution& a, const Solution& b) { return a.rms < b.rms; });
+  const Solution& best = solutions[0];
+  const cv::Vec3d rvec = best.rvec, tvec = best.tvec;
+  out.reprojection_error = best.rms;
+  out.alternative_rvec = out.alternative_tvec = cv::Vec3d();
+  out.alternative_reprojection_error = out.ambiguity_ratio = 0;
+  if (solutions.size() > 1) {
+    out.alternative_rvec = solutions[1].rvec, out.alternative_tvec = solutions[1].tvec;
+    out.alternative_reprojection_error = solutions[1].rms;
+    // A perfect fit (a synthetic marker) is unambiguous whenever the other is not perfect.
+    out.ambiguity_ratio = solutions[1].rms / std::max(best.rms, 1e-12);
   }
-  out.reprojection_error = std::sqrt(sq / image.size());
   out.rvec = rvec, out.tvec = tvec;
   out.tag_size = size;
   out.calibrated = camera.calibrated;

@@ -36,6 +36,10 @@ Detection make_detection(int n, TagId id, double base) {
   d.worst_cell = 0.015 * n;
   d.edge_score = 42.5 + n;
   d.reprojection_error = 0.03 * n;
+  d.alternative_rvec = {-0.1, 0.2, 0.3 + base};
+  d.alternative_tvec = {0.01, -0.02, 1.5 + 2 * base};
+  d.alternative_reprojection_error = 0.05 * n;
+  d.ambiguity_ratio = n > 0 ? 5.0 / 3.0 : 0.0;
   return d;
 }
 
@@ -51,6 +55,9 @@ void expect_equal(const Detection& a, const Detection& b) {
   fail_unless(a.decode_error == b.decode_error && a.edge_score == b.edge_score);
   fail_unless(a.worst_cell == b.worst_cell);
   fail_unless(a.reprojection_error == b.reprojection_error);
+  fail_unless(a.alternative_rvec == b.alternative_rvec && a.alternative_tvec == b.alternative_tvec);
+  fail_unless(a.alternative_reprojection_error == b.alternative_reprojection_error);
+  fail_unless(a.ambiguity_ratio == b.ambiguity_ratio);
 }
 
 void expect_equal(const MarkerTruth& a, const MarkerTruth& b) {

@@ -162,6 +162,11 @@ TEST(Cli, DetectPrintsOneJsonObjectPerImageInOrder) {
   EXPECT_EQ(d["center"].size(), 2u);
   EXPECT_NEAR(d["pose"]["tvec"][2].get<double>(), 2.0, 0.02);  // calibrated with the render's camera
   EXPECT_TRUE(d["pose"]["calibrated"].get<bool>());
+  // Both solutions of the planar pose: the other fits worse by the ratio.
+  EXPECT_GE(d["pose"]["ambiguity_ratio"].get<double>(), 1);
+  EXPECT_EQ(d["pose"]["alternative"]["tvec"].size(), 3u);
+  EXPECT_NEAR(d["pose"]["alternative"]["reprojection_error"].get<double>(),
+              d["pose"]["ambiguity_ratio"].get<double>() * d["reprojection_error"].get<double>(), 1e-9);
   ASSERT_EQ(lines[1]["detections"].size(), 1u);
   EXPECT_EQ(lines[1]["detections"][0]["id"], "21267647932558653966460912964485513215");  // a string over 53 bits
 }

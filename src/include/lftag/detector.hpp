@@ -178,6 +178,15 @@ struct Detection {
   double ink_spread = 0;                 // ink per design area, largest / smallest square
   double edge_score = 0;                 // mean Sobel magnitude along the inner border edge
   double reprojection_error = 0;         // RMS of the final pose over the n^2 centroids, pixels
+  // The planar pose has two solutions (IPPE finds both), each refined on the n^2 centroids:
+  // the one that fits them best is rvec/tvec, the other is here. A small marker seen
+  // nearly face on fits its flip (the marker tilted the other way) almost as well.
+  cv::Vec3d alternative_rvec, alternative_tvec;
+  double alternative_reprojection_error = 0;  // RMS of the other solution, pixels
+  // alternative_reprojection_error / reprojection_error: how much worse the other pose
+  // fits. Near 1 the pose is ambiguous (the chosen one may be the flip, and the z axis may
+  // jump between frames); from about 3 it is settled. 0 when there was no other solution.
+  double ambiguity_ratio = 0;
   // Read from the grey levels under its outline (a far or blurred marker whose squares no
   // binary image separated; see DetectorParams::second_look): decode_error, worst_cell and
   // ink_spread are then 0, and the centroids are the squares' centres under the aligned
