@@ -60,7 +60,8 @@
  * aligned outline, a far or blurred marker; decode-error and worst-cell are then
  * 0), and the planar pose's other solution: "alternative-rvec",
  * "alternative-tvec", "alternative-reprojection-error" and "ambiguity-ratio" (the
- * latter over reprojection-error: near 1 the pose may be the flip). A point is an array of two doubles, in pixels with pixel centres at integers.
+ * latter over reprojection-error: near 1 the pose may be the flip). A point is
+ * an array of two doubles, in pixels with pixel centres at integers.
  *
  * Poses need the camera: #GstLFTagDetect:calibration-file (OpenCV YAML, XML or
  * JSON, scaled to the frame when it records its own frame size) or
