@@ -508,14 +508,13 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                        0, G_MAXINT, defaults.max_candidates, playing));
   g_object_class_install_property(
       gobject_class, PROP_DEADLINE,
-      g_param_spec_double(
-          "deadline", "Deadline per frame (ms)",
-          "Milliseconds of processor time a frame's detection may take: once they are spent, the rest of "
-          "its work (candidates not yet decoded, second looks, outline reads) is skipped, "
-          "the most plausible candidates having gone first, so that no frame of "
-          "look-alikes or sensor noise stalls a live stream. The first frame cut posts a "
-          "warning. 0: no deadline (every frame gets all its work, as in lftag::Detector)",
-          0, 1e7, lftag::kLiveDeadlineMs, playing));
+      g_param_spec_double("deadline", "Deadline per frame (ms)",
+                          "Milliseconds of processor time a frame's detection may take: once they are spent, its "
+                          "optional work (the second looks at far or blurred markers, and their outline reads) is "
+                          "skipped, so that no frame of look-alikes or sensor noise stalls a live stream; the "
+                          "frame's own candidates are always examined. The first frame cut posts a warning. 0: no "
+                          "deadline (every frame gets all its work, as in lftag::Detector)",
+                          0, 1e7, lftag::kLiveDeadlineMs, playing));
 
   gst_element_class_set_static_metadata(element_class, "LFTag detector", "Filter/Analyzer/Video",
                                         "Finds LFTag fiducial markers, decodes their ids and estimates their poses. "
@@ -1054,8 +1053,9 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
     GST_ELEMENT_WARNING(
         self, STREAM, FAILED,
         ("The frame at %" GST_TIME_FORMAT " took longer than its deadline (deadline=%g ms): %" G_GINT64_FORMAT
-         " candidates, second looks and outline reads were skipped, the most plausible candidates "
-         "examined first. Markers may be missed in such frames; this is reported once per stream.",
+         " second looks, candidates in them and outline reads were skipped (the frame's own candidates "
+         "were all examined). Far or blurred markers may be missed in such frames; this is reported "
+         "once per stream.",
          GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), s.detector.deadline_ms, stats.skipped_by_deadline),
         (nullptr));
     st.warned_deadline = true;

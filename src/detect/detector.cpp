@@ -111,7 +111,7 @@ bool already_found(const std::vector<Detection>& found, cv::Point2d q) {
 }
 
 // Key points, decoding and pose of every candidate, most plausible first, until the
-// deadline; detections are appended to `found`, except where a detection already stands
+// deadline (a second look's; none for the frame's own); detections are appended to `found`, except where a detection already stands
 // (a second look can overlap one).
 void decode_candidates(const std::vector<detail::Candidate>& candidates, const ImageView& work, const Camera& camera,
                        const DetectorParams& p, bool second_look, const detail::Deadline& deadline,
@@ -404,11 +404,16 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   stats.candidates_ms = elapsed_ms(start);
   record_rejected(false);
 
-  decode_candidates(s.candidates, image, camera, p, false, deadline, stats, trace, found);
+  // The frame's own candidates are examined whatever the deadline (the budget bounds
+  // them), so that a slow machine still finds every sharp marker.
+  decode_candidates(s.candidates, image, camera, p, false, {}, stats, trace, found);
 
-  // The second look, around clusters that no detection covers (not sought at all once the
-  // deadline has passed).
-  if (p.second_look && !deadline.passed()) {
+  // The second look, around clusters that no detection covers: the optional work the
+  // deadline cuts (not sought at all once it has passed).
+  const std::int64_t skipped_before = stats.skipped_by_deadline;
+  bool cut = false;
+  if (p.second_look && deadline.passed()) cut = true;
+  if (p.second_look && !cut) {
     start = Clock::now();
     detail::SecondLook look;
     look.sought.reset();
@@ -458,7 +463,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
     }
   }
 
-  stats.past_deadline = deadline.passed() ? 1 : 0;
+  stats.past_deadline = cut || stats.skipped_by_deadline > skipped_before ? 1 : 0;
   if (trace) trace->detections = found;
   if (stats_out) *stats_out += stats;
   return found;

@@ -92,8 +92,9 @@ void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
                       std::to_string(DetectorParams{}.max_candidates) + ")")
       ->check(CLI::Range(0, 1 << 30));
   cmd->add_option("--deadline", o.deadline_ms,
-                  "Milliseconds of processor time an image may take: past them the rest of its work (candidates not yet decoded, "
-                  "second looks, outline reads) is skipped and counted (--stats: skipped_by_deadline). 0: none "
+                  "Milliseconds of processor time an image may take: past them its optional work (second looks at far "
+                  "or blurred markers, their outline reads) is skipped and counted (--stats: skipped_by_deadline); "
+                  "its own candidates are always examined. 0: none "
                   "(default " + CLI::detail::to_string(kLiveDeadlineMs) + ")")
       ->check(finite_in(0, 1e7));
 }

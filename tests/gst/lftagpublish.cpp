@@ -208,6 +208,9 @@ struct Publisher {
     gst_harness_set_src_caps_str(h, "video/x-raw,format=GRAY8,width=32,height=24,framerate=30/1");
   }
   ~Publisher() {
+    // Messages left on the bus hold the element, which holds the bus: drop them first.
+    gst_element_set_bus(h->element, nullptr);
+    gst_bus_set_flushing(bus, TRUE);
     gst_harness_teardown(h);
     gst_object_unref(bus);
   }

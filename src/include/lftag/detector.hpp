@@ -82,11 +82,13 @@ struct DetectorParams {
   int max_candidates = 128;
 
   // -- Per-frame deadline: milliseconds of the calling thread's processor time from the
-  //    start of detect(). Once they are spent, the frame's remaining work (candidates not
-  //    yet decoded, second looks, outline reads, and the rest of an outline read under
-  //    way) is skipped and counted (DetectionStats::skipped_by_deadline), the most
-  //    plausible candidates having gone first. It bounds what a frame of look-alikes or
-  //    sensor noise costs in milliseconds, where the counts above bound it only in work;
+  //    start of detect(). Once they are spent, the frame's optional work is skipped and
+  //    counted (DetectionStats::past_deadline, skipped_by_deadline): the second looks not
+  //    yet taken, the candidates and outline reads of the one under way, and the rest of an
+  //    outline read under way. The frame's own candidates are always examined (the budget
+  //    bounds them), so every sharp marker is found however slow the machine. It bounds
+  //    what a frame of look-alikes or sensor noise costs in milliseconds, where the counts
+  //    above bound it only in work;
   //    processor time rather than wall-clock time, so that other programs on the machine
   //    do not cut a frame (a stream that falls behind is GStreamer's QoS's to handle).
   //    0: none, so that a detection does all its work and gives the same result on any
@@ -153,8 +155,9 @@ struct DetectorParams {
 };
 
 // The deadline of the element and the command line (DetectorParams::deadline_ms): a 720p
-// frame's fixed work (binarisation, labelling) takes 1 to 3 ms and the work under way when
-// the deadline passes at most a few more, so a frame stays within the 33 ms of 30 fps.
+// frame's fixed work (binarisation, labelling, its own candidates) takes 1 to 3 ms in
+// ordinary frames and the step under way when the deadline passes a few more, so a frame
+// stays within the 33 ms of 30 fps.
 constexpr double kLiveDeadlineMs = 25;
 
 // tau3 defaults: the paper's 5e-4 (3x3) and 1e-3 (4x4), and calibrated values for the others.
@@ -215,8 +218,10 @@ struct DetectionStats {
   std::int64_t outline_reads_skipped = 0;  // outline reads not made: the frame's bound (32) was reached
   std::int64_t skipped_by_budget = 0;  // candidates not decoded: DetectorParams::max_candidates was spent
   std::int64_t second_looks_skipped = 0;  // clusters not looked at again: max_second_looks or the budget
-  std::int64_t past_deadline = 0;         // frames whose deadline (DetectorParams::deadline_ms) cut their work
-  std::int64_t skipped_by_deadline = 0;   // candidates, second looks and outline reads it cut (one under way included)
+  std::int64_t past_deadline = 0;         // frames whose deadline (DetectorParams::deadline_ms) cut their second looks
+  std::int64_t skipped_by_deadline = 0;   // second looks, their candidates and outline reads it cut (one under way
+                                          // included; the second looks of a frame cut before they were sought are
+                                          // not counted)
   double threshold_ms = 0;             // binarisation
   double regions_ms = 0;               // topological connected components
   double candidates_ms = 0;            // topological filtering and vertex estimation
@@ -234,7 +239,8 @@ enum class Stage {
   area,          // the area constraint (tau1)
   budget,        // not examined: the frame's candidate budget (max_candidates) or its
                  // outline reads were spent
-  deadline,      // not examined, or an outline read cut short: the frame's deadline had passed
+  deadline,      // a second look's candidate not examined, or an outline read cut short: the frame's
+                 // deadline had passed
   geometry,      // the geometry constraint, on every side of the hull
   angle,         // the angle constraint
   collinearity,  // the collinearity constraint (tau2)
