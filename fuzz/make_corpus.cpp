@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // Writes the seed corpora of the frame targets (fuzz/corpus/frames, fuzz/corpus/scenes)
-// in the input format of frame_input.hpp (about 250 KB in all), and prints how many markers the detector finds
+// in the input format of frame_input.hpp (about 150 KB in all), and prints how many markers the detector finds
 // in each seed. Run once by hand when the format changes:
 //
 //   build-sanitize/fuzz/make_corpus fuzz/corpus
@@ -44,11 +44,12 @@ int main(int argc, char** argv) {
   write(dir + "/frames/flat", cv::Mat1b(8, 8, std::uint8_t(128)), 0);
 
   // Rendered scenes: every family, face-on and turned, tilted, blurred and noisy, at
-  // 96x80 (2x2 to 5x5) or 128x128 (6x6 to 8x8), the marker's border about 0.6 of the
-  // frame's height across.
+  // 64x56 (2x2 to 5x5) or 80x80 (6x6 to 8x8), the marker's border about 0.6 of the
+  // frame's height across: small, so that the detector (with fuzz_scenes' deadline)
+  // reaches decoding and pose in milliseconds, and every marker is still found.
   for (int n = lftag::Family::kMinN; n <= lftag::Family::kMaxN; ++n) {
     const lftag::Family family(n);
-    const int w = n <= 5 ? 96 : 128, h = n <= 5 ? 80 : 128;
+    const int w = n <= 5 ? 64 : 80, h = n <= 5 ? 56 : 80;
     for (int variant = 0; variant < 3; ++variant) {
       lftag::SceneParams scene;
       scene.camera = lftag::Camera::pinhole(w, w, (w - 1) / 2.0, (h - 1) / 2.0, w, h);
