@@ -196,7 +196,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   guint overlay = settings & (input::kOverlayOutline | input::kOverlayId | input::kOverlayAxes);
   std::string family_list;
   for (int n = 2; n <= 8; ++n)
-    if (families & (1 << (n - 2))) family_list += (family_list.empty() ? "" : ",") + std::to_string(n) + "x" + std::to_string(n);
+    if (families & (1 << (n - 2)))
+      family_list += (family_list.empty() ? "" : ",") + std::to_string(n) + "x" + std::to_string(n);
   const bool late_frames = settings & input::kLateFrames;
   g_object_set(element, "overlay", overlay, "second-look", gboolean(!(settings & input::kNoSecondLook)), "messages",
                (settings >> input::kMessagesShift) & 3, "late-frames", gint(late_frames), "deadline",
@@ -205,11 +206,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 
   // Plays at once (the harness starts a filter), then negotiates the caps.
   GstHarness* h = gst_harness_new_with_element(element, "sink", "src");
-  if (settings & input::kCompositions) gst_harness_add_propose_allocation_meta(h, GST_VIDEO_OVERLAY_COMPOSITION_META_API_TYPE, nullptr);
+  if (settings & input::kCompositions)
+    gst_harness_add_propose_allocation_meta(h, GST_VIDEO_OVERLAY_COMPOSITION_META_API_TYPE, nullptr);
   set_caps(h, caps);
   if (late_frames)  // downstream says the frames are late, up to some time
-    gst_harness_push_upstream_event(h, gst_event_new_qos(GST_QOS_TYPE_UNDERFLOW, 0.5, GstClockTimeDiff(in.u16()) * GST_MSECOND,
-                                                         GstClockTime(in.u8()) * 10 * GST_MSECOND));
+    gst_harness_push_upstream_event(
+        h, gst_event_new_qos(GST_QOS_TYPE_UNDERFLOW, 0.5, GstClockTimeDiff(in.u16()) * GST_MSECOND,
+                             GstClockTime(in.u8()) * 10 * GST_MSECOND));
 
   for (int i = 0; i < buffers; ++i) {
     const std::uint8_t flags = in.u8();

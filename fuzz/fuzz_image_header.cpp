@@ -42,7 +42,9 @@ std::string path;
 // `is.good()` (gdcmReader.cxx:385) aborts the process on a file cut short: 132 bytes
 // stop `lftag detect`. image_file_size reads no DICOM size, so refusing the formats it
 // cannot size fixes it. Such inputs are not decoded.
-bool dicom(const std::uint8_t* data, std::size_t size) { return size >= 132 && std::memcmp(data + 128, "DICM", 4) == 0; }
+bool dicom(const std::uint8_t* data, std::size_t size) {
+  return size >= 132 && std::memcmp(data + 128, "DICM", 4) == 0;
+}
 
 // A '#' right after a number of a PNM header starts a comment for image_file_size (as
 // the Netpbm format says) but only ends the number for OpenCV, which reads the next

@@ -81,12 +81,12 @@ bool same_truth(const MarkerTruth& a, const MarkerTruth& b) {
   auto points = [](const std::vector<cv::Point2d>& p, const std::vector<cv::Point2d>& q) {
     return p.size() == q.size() && same_points(p.data(), q.data(), p.size(), same_bits);
   };
-  return a.family == b.family && a.id == b.id && same_bits(a.tag_size, b.tag_size) &&
-         same_bits(a.rvec[0], b.rvec[0]) && same_bits(a.rvec[1], b.rvec[1]) && same_bits(a.rvec[2], b.rvec[2]) &&
-         same_bits(a.tvec[0], b.tvec[0]) && same_bits(a.tvec[1], b.tvec[1]) && same_bits(a.tvec[2], b.tvec[2]) &&
-         points(a.keypoints, b.keypoints) && points(a.centers, b.centers) && points(a.centroids, b.centroids) &&
-         points(a.corners, b.corners) && same_points(&a.center, &b.center, 1, same_bits) &&
-         a.fully_visible == b.fully_visible && same_bits(a.edge_px, b.edge_px);
+  return a.family == b.family && a.id == b.id && same_bits(a.tag_size, b.tag_size) && same_bits(a.rvec[0], b.rvec[0]) &&
+         same_bits(a.rvec[1], b.rvec[1]) && same_bits(a.rvec[2], b.rvec[2]) && same_bits(a.tvec[0], b.tvec[0]) &&
+         same_bits(a.tvec[1], b.tvec[1]) && same_bits(a.tvec[2], b.tvec[2]) && points(a.keypoints, b.keypoints) &&
+         points(a.centers, b.centers) && points(a.centroids, b.centroids) && points(a.corners, b.corners) &&
+         same_points(&a.center, &b.center, 1, same_bits) && a.fully_visible == b.fully_visible &&
+         same_bits(a.edge_px, b.edge_px);
 }
 
 bool same_frame(const FrameDetections& a, const FrameDetections& b) {
@@ -173,18 +173,19 @@ void check_json(GstBuffer* buffer, const GstSegment& segment, guint64 frame, con
   else
     check(j.at("time").is_null(), "JSON time");
   const bool in_time = segment.format == GST_FORMAT_TIME && GST_BUFFER_PTS_IS_VALID(buffer);
-  check_time(j.at("running_time"),
-             in_time ? gst_segment_to_running_time(&segment, GST_FORMAT_TIME, GST_BUFFER_PTS(buffer))
-                     : GST_CLOCK_TIME_NONE,
-             "JSON running_time");
-  check_time(j.at("stream_time"),
-             in_time ? gst_segment_to_stream_time(&segment, GST_FORMAT_TIME, GST_BUFFER_PTS(buffer))
-                     : GST_CLOCK_TIME_NONE,
-             "JSON stream_time");
+  check_time(
+      j.at("running_time"),
+      in_time ? gst_segment_to_running_time(&segment, GST_FORMAT_TIME, GST_BUFFER_PTS(buffer)) : GST_CLOCK_TIME_NONE,
+      "JSON running_time");
+  check_time(
+      j.at("stream_time"),
+      in_time ? gst_segment_to_stream_time(&segment, GST_FORMAT_TIME, GST_BUFFER_PTS(buffer)) : GST_CLOCK_TIME_NONE,
+      "JSON stream_time");
   check(j.at("width") == expected.width && j.at("height") == expected.height, "JSON width, height");
   const nlohmann::json& detections = j.at("detections");
   check(detections.is_array() && detections.size() == expected.detections.size(), "JSON detections");
-  for (std::size_t i = 0; i < expected.detections.size(); ++i) check_detection_json(detections[i], expected.detections[i]);
+  for (std::size_t i = 0; i < expected.detections.size(); ++i)
+    check_detection_json(detections[i], expected.detections[i]);
 }
 
 // ---- binary mode

@@ -43,7 +43,8 @@ using Bytes = std::vector<std::uint8_t>;
 
 void save(const std::string& path, const Bytes& bytes) {
   std::filesystem::create_directories(std::filesystem::path(path).parent_path());
-  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
 }
 void save(const std::string& path, const std::string& text) { save(path, Bytes(text.begin(), text.end())); }
 
@@ -131,12 +132,15 @@ void calibration_seeds(const std::string& dir) {
   // 2,000 attributes on the matrix (about 25 KB), for mutations to multiply.
   std::string attributes;
   for (int i = 0; i < 2000; ++i) attributes += " a" + std::to_string(i) + "=\"" + std::to_string(i) + "\"";
-  save(dir + "/large-attributes.xml", "<?xml version=\"1.0\"?>\n<opencv_storage>\n<camera_matrix type_id=\"opencv-matrix\"" +
-                                         attributes + ">\n" + matrix + "</camera_matrix>\n" + distortion +
-                                         "</opencv_storage>\n");
+  const std::string head = "<?xml version=\"1.0\"?>\n<opencv_storage>\n";
+  save(dir + "/large-attributes.xml", head + "<camera_matrix type_id=\"opencv-matrix\"" + attributes + ">\n" + matrix +
+                                         "</camera_matrix>\n" + distortion + "</opencv_storage>\n");
   // 10,000 elements that are not read, before the ones that are (about 200 KB).
   std::string elements;
-  for (int i = 0; i < 10000; ++i) elements += "<note" + std::to_string(i % 97) + ">x</note" + std::to_string(i % 97) + ">\n";
+  for (int i = 0; i < 10000; ++i) {
+    const std::string name = "note" + std::to_string(i % 97);
+    elements += "<" + name + ">x</" + name + ">\n";
+  }
   save(dir + "/large-elements.xml", "<?xml version=\"1.0\"?>\n<opencv_storage>\n" + elements +
                                        "<camera_matrix type_id=\"opencv-matrix\">" + matrix + "</camera_matrix>\n" +
                                        distortion + "</opencv_storage>\n");
