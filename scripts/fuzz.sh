@@ -7,7 +7,10 @@
 # fails the target, and its input is kept in build-sanitize/fuzz-artifacts/TARGET/.
 # Writes build-sanitize/fuzz-logs/testlog.junit.xml (one case per target) for
 # scripts/summarize-tests.py. Exit status: 0 all passed, 1 a target failed, 2 the build failed.
-#   scripts/fuzz.sh [SECONDS] [TARGET...]      targets: frames scenes ids families calibration
+#   scripts/fuzz.sh [SECONDS] [TARGET...]   targets: frames scenes ids families calibration
+#                                           image_header json element (element and json
+#                                           need GStreamer's gstreamer-check-1.0)
+#   scripts/fuzz.sh --hour [TARGET...]      one hour in all, shared between the targets
 # A finding is replayed with `build-sanitize/fuzz/fuzz_TARGET FILE`; once fixed, copy FILE into
 # fuzz/corpus/TARGET/ so that the sanitizer suite (suite `fuzz`) replays it from then on.
 set -uo pipefail
@@ -16,7 +19,8 @@ cd "$root"
 seconds=${1:-20}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(frames scenes ids families calibration)
+[ ${#targets[@]} -gt 0 ] || targets=(frames scenes ids families calibration image_header json element)
+[ "$seconds" = --hour ] && seconds=$((3600 / ${#targets[@]}))
 
 "$root/scripts/install-deps.sh" || exit 2
 "$root/scripts/setup-sanitize.sh" || exit 2
@@ -26,9 +30,16 @@ ninja -C build-sanitize $(printf 'fuzz/fuzz_%s ' "${targets[@]}") || exit 2
 export ASAN_OPTIONS=halt_on_error=1:detect_leaks=1:print_summary=1
 export UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1:print_summary=1
 export LSAN_OPTIONS=suppressions=$root/tests/sanitizers/lsan.supp:print_suppressions=0
+# GLib's slice allocator would hide a use after free of a GStreamer object (as in tests/meson.build).
+export G_SLICE=always-malloc
 
-declare -A max_len=([frames]=16384 [scenes]=20000 [ids]=1024 [families]=256 [calibration]=4096)
-declare -A timeout=([frames]=20 [scenes]=20 [ids]=10 [families]=10 [calibration]=10)
+# frames, scenes: 128 x 128 pixels and their padding (frame_input.hpp's kMaxInput);
+# calibration: the loader's limit plus one byte (kMaxCalibrationBytes, calibration_file.hpp);
+# element: a 64 KB pixel pattern (element_input.hpp); image_header: small files.
+declare -A max_len=([frames]=18295 [scenes]=18295 [ids]=1024 [families]=256 [calibration]=1048577
+                    [image_header]=65536 [json]=16384 [element]=65600)
+declare -A timeout=([frames]=20 [scenes]=20 [ids]=10 [families]=10 [calibration]=10
+                    [image_header]=10 [json]=10 [element]=20)
 logs=build-sanitize/fuzz-logs
 mkdir -p "$logs"
 cases=() failures=0 total=0

@@ -19,7 +19,7 @@ if [ $# -eq 0 ] && [ "${LFTAG_SANITIZERS:-1}" != 0 ]; then
   scripts/test-sanitizers.sh
   [ $? -eq 2 ] && failed=$((failed + 1))  # a build failed: no log counts it
   logs+=(build-sanitize/meson-logs build-tsan/meson-logs)
-  scripts/fuzz.sh "${FUZZ_SECONDS:-20}" frames scenes ids families calibration
+  scripts/fuzz.sh "${FUZZ_SECONDS:-20}" frames scenes ids families calibration image_header json element
   [ $? -eq 2 ] && failed=$((failed + 1))
   logs+=(build-sanitize/fuzz-logs)
 fi
