@@ -77,7 +77,7 @@ struct Plan {
   int clips, frames;        // per condition and set
   int timed_clips, passes;  // the clips timed per condition and set, and the passes over them
 };
-constexpr Plan kFull{5, 10, 2, 3}, kQuick{1, 2, 1, 1};
+constexpr Plan kFull{5, 10, 2, 1}, kQuick{1, 2, 1, 1};
 
 // How many sheets a clip holds, how large and how they move.
 struct Layout {
@@ -779,8 +779,17 @@ struct Seen {
 
 // Scores one frame's detections against all its markers (cut and occluded ones too: a
 // detection of them is not wrong).
+// A wrong detection, for a look at what it was: its id and centre, the marker it lies
+// nearest and how far from that marker's centre, in projected edges.
+struct Wrong {
+  std::string id;
+  cv::Point2d center;
+  int nearest = 0;
+  double distance_edges = 0;
+};
+
 std::vector<Seen> score_frame(const std::vector<Detected>& detections, const Clip& c, int f,
-                              const std::vector<std::string>& frame_ids) {
+                              const std::vector<std::string>& frame_ids, std::vector<Wrong>& wrongs) {
   const std::size_t n = c.extras.size();
   std::vector<Seen> out(n);
   std::vector<cv::Point2d> centers;
@@ -802,7 +811,10 @@ std::vector<Seen> score_frame(const std::vector<Detected>& detections, const Cli
       matched = matched || (d.id == frame_ids[m] && distance <= tolerances[m]);
       if (distance < cv::norm(d.center - centers[nearest])) nearest = m;
     }
-    if (!matched) ++out[nearest].wrong;
+    if (matched) continue;
+    ++out[nearest].wrong;
+    wrongs.push_back({d.id, d.center, int(nearest),
+                      cv::norm(d.center - centers[nearest]) / edge_px(c.camera, c.poses[f][nearest], kTagSize)});
   }
   return out;
 }
@@ -886,7 +898,11 @@ bool run_field(const Options& options) {
   // Accuracy: every clip, on all workers. [clip][frame] truths, [clip][frame][system] seen.
   std::vector<std::vector<std::vector<Truth>>> truths(clips.size());
   std::vector<std::vector<std::vector<std::vector<Seen>>>> seen(clips.size());
+  std::vector<std::vector<std::vector<std::vector<Wrong>>>> wrongs(clips.size());
   int done = 0;
+  // The quick plan's few frames are kept for the timing instead of being drawn again.
+  const bool keep = options.quick;
+  std::map<std::size_t, std::vector<std::vector<cv::Mat1b>>> kept;  // by clip
   parallel_for(int(clips.size()), threads, [&](int k, int worker) {
     const Clip& c = clips[std::size_t(order[std::size_t(k)])];
     const std::size_t ci = std::size_t(order[std::size_t(k)]);
@@ -894,14 +910,15 @@ bool run_field(const Options& options) {
     for (auto& s : systems) s->set_camera(c.camera, kTagSize);
     std::vector<std::vector<std::string>> clip_ids;
     for (int s = 0; s < n; ++s) clip_ids.push_back(ids[c.set][s]);
-    const auto images = render_clip(c, source_frames(c), systems, clip_ids, options.seed);
+    auto images = render_clip(c, source_frames(c), systems, clip_ids, options.seed);
     truths[ci].resize(c.frames);
     seen[ci].assign(c.frames, std::vector<std::vector<Seen>>(n));
+    wrongs[ci].assign(c.frames, std::vector<std::vector<Wrong>>(n));
     for (int f = 0; f < c.frames; ++f) {
       truths[ci][f] = truth_of(c, f);
       for (int s = 0; s < n; ++s) {
         const std::vector<std::string> fid = frame_ids(c, s);
-        seen[ci][f][s] = score_frame(systems[s]->detect(images[s][f]), c, f, fid);
+        seen[ci][f][s] = score_frame(systems[s]->detect(images[s][f]), c, f, fid, wrongs[ci][f][s]);
         if (options.save_misses.empty()) continue;
         for (std::size_t m = 0; m < fid.size(); ++m)
           if (!seen[ci][f][s][m].found && truths[ci][f][m].subset == kVisible) {
@@ -913,6 +930,7 @@ bool run_field(const Options& options) {
       }
     }
     std::lock_guard<std::mutex> lock(mutex);
+    if (keep && c.index < plan.timed_clips) kept[ci] = std::move(images);
     if (++done % 10 == 0 || done == int(clips.size()))
       progress("field: " + std::to_string(done) + " / " + std::to_string(clips.size()) + " clips");
   });
@@ -934,7 +952,10 @@ bool run_field(const Options& options) {
       const Clip& c = clips[std::size_t(timed[first + std::size_t(k)])];
       std::vector<std::vector<std::string>> clip_ids;
       for (int s = 0; s < n; ++s) clip_ids.push_back(ids[c.set][s]);
-      images[std::size_t(k)] = render_clip(c, source_frames(c), workers[std::size_t(worker)], clip_ids, options.seed);
+      const auto found = kept.find(std::size_t(timed[first + std::size_t(k)]));
+      images[std::size_t(k)] =
+          found != kept.end() ? std::move(found->second)
+                              : render_clip(c, source_frames(c), workers[std::size_t(worker)], clip_ids, options.seed);
     });
     std::vector<std::unique_ptr<FiducialSystem>>& systems = workers[0];
     for (std::size_t k = 0; k < count; ++k) {
@@ -1027,12 +1048,25 @@ bool run_field(const Options& options) {
        "with_pose", "median_translation_pct", "p90_translation_pct", "median_rotation_deg", "p90_rotation_deg"});
   Csv times_csv(options.out / "field_times.csv", {"system", "family", "set", "condition", "width", "height", "frames",
                                                   "samples", "mean_ms", "median_ms", "p99_ms"});
+  Csv wrong_csv(options.out / "field_wrong.csv",
+                {"system", "family", "set", "condition", "clip", "frame", "id", "x", "y", "nearest_marker",
+                 "nearest_id", "nearest_subset", "nearest_edge_px", "distance_edges"});
   struct Tally {
     int frames = 0, markers = 0, found = 0, wrong = 0;
     std::vector<double> translation_pct, rotation_deg;
   };
   for (int s = 0; s < n; ++s) {
     const std::string& name = options.systems[s];
+    for (std::size_t ci = 0; ci < clips.size(); ++ci) {
+      const Clip& c = clips[ci];
+      const std::vector<std::string> fid = frame_ids(c, s);
+      for (int f = 0; f < c.frames; ++f)
+        for (const Wrong& w : wrongs[ci][f][s])
+          wrong_csv.row(name, families[s], kSets[c.set], kInfo[c.condition].name, c.index, f, w.id, w.center.x,
+                        w.center.y, w.nearest, fid[std::size_t(w.nearest)],
+                        kSubsetNames[truths[ci][f][std::size_t(w.nearest)].subset],
+                        truths[ci][f][std::size_t(w.nearest)].edge, w.distance_edges);
+    }
     // [set][condition + 1 for all][subset]
     std::vector<std::vector<std::vector<Tally>>> tally(
         2, std::vector<std::vector<Tally>>(kConditions + 1, std::vector<Tally>(kSubsets)));
