@@ -23,6 +23,9 @@ const std::vector<Experiment>& experiments() {
       {"speed", "median time per 1280x720 and 1920x1080 frame, one thread", run_speed},
       {"adversarial", "time and recall on grids of dotted tiles that make thousands of candidates, against an ordinary frame",
        run_adversarial},
+      {"field", "recall, wrong ids, pose error and time per condition (shadows, motion and rolling shutter, pillbox, "
+                "barrel, low light, Bayer, bent, small at 1080p, crowded, occlusion, H.264), tuning and validation sets",
+       run_field},
   };
   return all;
 }

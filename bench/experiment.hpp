@@ -40,6 +40,7 @@ bool run_false_positives(const Options& options);
 bool run_video(const Options& options);
 bool run_speed(const Options& options);
 bool run_adversarial(const Options& options);
+bool run_field(const Options& options);
 
 // A generator seeded from the run seed and a path of indices, so that every system sees
 // the same random poses and frames whatever the thread and order.

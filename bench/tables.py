@@ -192,6 +192,102 @@ def adversarial_table(results):
                  rows)
 
 
+FIELD_CONDITIONS = ["plain", "shadow", "motion", "pillbox", "barrel", "low-light", "bayer", "bent", "small-1080p",
+                    "crowded", "occlusion", "h264", "h264-1080p"]
+FIELD_SETS = ["tuning", "validation"]
+
+
+def field_rows(results):
+    """field_summary.csv by (system, set, condition, subset), systems in file order."""
+    rows, systems = {}, []
+    for r in read(results, "field_summary.csv"):
+        rows[(r["system"], r["set"], r["condition"], r["subset"])] = r
+        if r["system"] not in systems:
+            systems.append(r["system"])
+    conditions = [c for c in FIELD_CONDITIONS + ["all"] if any(k[2] == c for k in rows)]
+    return rows, systems, conditions
+
+
+def tuned_validated(rows, system, condition, subset, cell):
+    """One cell per set, "tuning / validation"; "-" where a set has no such markers."""
+    values = [cell(rows[k]) if (k := (system, s, condition, subset)) in rows else "-" for s in FIELD_SETS]
+    return " / ".join(values)
+
+
+def field_recall_table(results):
+    rows, systems, conditions = field_rows(results)
+    def cell(r):
+        return f"{float(r['recall_pct']):.1f}"
+    header = ["system (recall %, tuning / validation)"]
+    for c in conditions:
+        counts = [rows[k]["markers"] for s in FIELD_SETS
+                  if (k := (systems[0], s, c, "visible")) in rows] if systems else []
+        header.append(f"{c} ({' / '.join(counts)})")
+    return table(header, [[system] + [tuned_validated(rows, system, c, "visible", cell) for c in conditions]
+                          for system in systems])
+
+
+def field_apart_table(results):
+    rows, systems, _ = field_rows(results)
+    def cell(r):
+        return f"{r['found']}/{r['markers']}"
+    return table(["system (found / markers, tuning / validation)", "crowded: cut by the frame edge",
+                  "occlusion: occluded"],
+                 [[system, tuned_validated(rows, system, "crowded", "cut", cell),
+                   tuned_validated(rows, system, "occlusion", "occluded", cell)] for system in systems])
+
+
+def field_wrong_table(results):
+    rows, systems, conditions = field_rows(results)
+    def wrong(system, s, c):
+        return sum(int(r["wrong"]) for k, r in rows.items() if k[0] == system and k[1] == s and k[2] == c)
+    return table(["system (wrong ids, tuning / validation)"] + conditions,
+                 [[system] + [f"{wrong(system, 'tuning', c)} / {wrong(system, 'validation', c)}" for c in conditions]
+                  for system in systems])
+
+
+def field_pose_table(results):
+    rows, systems, conditions = field_rows(results)
+    def cell(r):
+        if not r["median_translation_pct"]:
+            return "-"
+        return f"{float(r['median_translation_pct']):.2f} % {float(r['median_rotation_deg']):.2f}°"
+    return table(["system (median translation error, % of distance, and rotation error; tuning / validation)"]
+                 + conditions,
+                 [[system] + [tuned_validated(rows, system, c, "visible", cell) for c in conditions]
+                  for system in systems])
+
+
+def field_p90_table(results):
+    rows, systems, _ = field_rows(results)
+    def cell(key, digits):
+        return lambda r: f"{float(r[key]):.{digits}f}" if r[key] else "-"
+    return table(["system (visible markers of every condition; tuning / validation)", "markers", "found",
+                  "median translation (%)", "p90 translation (%)", "median rotation (deg)", "p90 rotation (deg)"],
+                 [[system, tuned_validated(rows, system, "all", "visible", lambda r: r["markers"]),
+                   tuned_validated(rows, system, "all", "visible", lambda r: r["found"]),
+                   tuned_validated(rows, system, "all", "visible", cell("median_translation_pct", 3)),
+                   tuned_validated(rows, system, "all", "visible", cell("p90_translation_pct", 3)),
+                   tuned_validated(rows, system, "all", "visible", cell("median_rotation_deg", 3)),
+                   tuned_validated(rows, system, "all", "visible", cell("p90_rotation_deg", 3))] for system in systems])
+
+
+def field_times_table(results):
+    times, systems = {}, []
+    for r in read(results, "field_times.csv"):
+        if r["set"] == "both":
+            times[(r["system"], r["condition"])] = r
+            if r["system"] not in systems:
+                systems.append(r["system"])
+    conditions = [c for c in FIELD_CONDITIONS if any(k[1] == c for k in times)]
+    def cell(system, c):
+        r = times.get((system, c))
+        return (f"{float(r['mean_ms']):.1f} / {float(r['median_ms']):.1f} / {float(r['p99_ms']):.1f}" if r
+                else "-")
+    return table(["system (ms per frame, one thread: mean / median / p99, both sets)"] + conditions,
+                 [[system] + [cell(system, c) for c in conditions] for system in systems])
+
+
 def main(results):
     results = Path(results)
     for title, make in [("Range", range_table), ("Grazing angle", angle_table), ("Motion blur", blur_table),
@@ -199,7 +295,13 @@ def main(results):
                         ("False positives", fp_table), ("Funnel", funnel_table), ("Speed", speed_table),
                         ("Stages", stage_table), ("Throughput", throughput_table), ("Video", video_table),
                         ("Video recall by projected edge and tilt", video_bins_table),
-                        ("Adversarial frames", adversarial_table)]:
+                        ("Adversarial frames", adversarial_table),
+                        ("Field recall (visible markers; tuning / validation)", field_recall_table),
+                        ("Field: cut and occluded markers, reported apart", field_apart_table),
+                        ("Field wrong ids", field_wrong_table),
+                        ("Field pose error by condition", field_pose_table),
+                        ("Field pose error, all conditions", field_p90_table),
+                        ("Field frame times", field_times_table)]:
         print(f"### {title}\n\n{make(results)}\n")
 
 

@@ -41,9 +41,20 @@ EXPECTED = {
                            "median_translation_pct", "p90_translation_pct", "median_rotation_deg"], True),
     "video_clips.csv": (["clip", "video", "defocus_sigma_px", "noise_sigma", "light_gradient"], False),
     "video_counters.csv": (["system", "counter", "value"], False),
+    "field.csv": (["system", "set", "condition", "clip", "frame", "marker", "id", "subset", "edge_px", "found", "wrong",
+                   "translation_error_pct", "rotation_error_deg", "blur_px", "bend_radius_m", "occluded_pct"], True),
+    "field_summary.csv": (["system", "set", "condition", "subset", "frames", "markers", "found", "recall_pct", "wrong",
+                           "median_translation_pct", "p90_translation_pct", "median_rotation_deg", "p90_rotation_deg"],
+                          True),
+    "field_times.csv": (["system", "set", "condition", "frames", "samples", "mean_ms", "median_ms", "p99_ms"], True),
+    "field_wrong.csv": (["system", "set", "condition", "clip", "frame", "id", "nearest_id", "distance_edges"], False),
+    "field_clips.csv": (["set", "condition", "clip", "background", "codec", "kbps", "shadow_level", "pillbox_radius_px",
+                         "k1", "black", "white", "gamma"], False),
     "adversarial.csv": (["config", "variant", "median_ms", "ratio", "candidates", "skipped_by_budget", "found",
                          "all_found", "mean_ms", "p99_ms", "max_ms", "past_deadline", "skipped_by_deadline"], False),
 }
+FIELD_CONDITIONS = ["plain", "shadow", "motion", "pillbox", "barrel", "low-light", "bayer", "bent", "small-1080p",
+                    "crowded", "occlusion", "h264", "h264-1080p"]
 PLOTS = ["range_vs_dictionary.png", "range_rate.png", "blur_polar.png", "pose_error.png", "speed.png",
          "video_recall.png"]
 
@@ -94,6 +105,29 @@ def main(bench, plot, work):
             if r["all_found"] != "1":
                 fail(f"adversarial: {r['config']} {r['variant']}: {r['found']} of {r['markers']} real markers found")
 
+    # The field experiment: both sets in every row and every condition in both; H.264 only
+    # when GStreamer's elements are there (the program says so when they are not).
+    with open(work / "field_summary.csv", newline="") as f:
+        field = list(csv.DictReader(f))
+    if {r["set"] for r in field} != {"tuning", "validation"}:
+        fail("field_summary.csv: rows must carry the set, tuning or validation, and both must be there")
+    with open(work / "field_times.csv", newline="") as f:
+        if not {r["set"] for r in csv.DictReader(f)} <= {"tuning", "validation", "both"}:
+            fail("field_times.csv: a row without its set")
+    with open(work / "field_clips.csv", newline="") as f:
+        codecs = {r["codec"] for r in csv.DictReader(f)}
+    conditions = set(FIELD_CONDITIONS) if "h264" in codecs else set(FIELD_CONDITIONS) - {"h264", "h264-1080p"}
+    for s in SYSTEMS:
+        for field_set in ("tuning", "validation"):
+            present = {r["condition"] for r in field if r["system"] == s and r["set"] == field_set}
+            if not conditions <= present:
+                fail(f"field: {s} {field_set} lacks conditions {sorted(conditions - present)}")
+        # Plain frames hold nothing unusual: a system finding none of them means the
+        # markers are not where the truth says.
+        plain = [r for r in field if r["system"] == s and r["condition"] == "plain" and r["subset"] == "visible"]
+        if not plain or sum(int(r["found"]) for r in plain) == 0:
+            fail(f"field: {s} found none of the plain markers")
+
     meta = json.loads((work / "meta.json").read_text())
     if meta["mode"] != "quick" or not set(SYSTEMS) <= set(meta["systems"]):
         fail("meta.json does not describe the run")
@@ -119,6 +153,10 @@ def main(bench, plot, work):
             fail(f"tables.py: no {section} table with {SYSTEMS[0]} in it")
         if "| " not in body:
             fail(f"tables.py: no {section} table")
+    for section in ("Field recall", "Field wrong ids", "Field frame times"):
+        body = run.stdout.split(f"### {section}", 1)[1].split("###", 1)[0] if f"### {section}" in run.stdout else ""
+        if SYSTEMS[0] not in body or "| " not in body:
+            fail(f"tables.py: no {section} table with {SYSTEMS[0]} in it")
     if "### Adversarial frames" not in run.stdout or "white-4-10px" not in run.stdout:
         fail("tables.py: no Adversarial frames table")
     print("bench quick run: all results, plots and tables written")

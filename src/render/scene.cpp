@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
-// Synthetic camera frames. Each pixel is traced back onto the target planes through the
-// camera model. A pixel whose four corners fall in one cell of a target lies wholly in
-// that cell (the pixel's footprint on the plane is convex, and so is the cell), so only
+// Synthetic camera frames. Each pixel is traced back onto the target planes (or a bent
+// target's cylinder) through the camera model. A pixel whose four corners fall in one
+// cell of a target lies wholly in that cell (the pixel's footprint on the plane is
+// convex, and so is the cell; on a cylinder nearly so at a pixel's scale), so only
 // pixels that straddle an edge are supersampled.
 #include <algorithm>
 #include <cmath>
@@ -23,15 +24,48 @@ enum Miss : int { kLeft = -1, kRight = -2, kAbove = -3, kBelow = -4, kBehind = -
 struct PlaneMap {
   cv::Matx33d image_to_plane;  // normalised image coordinates -> plane grid coordinates
   int cols = 0, rows = 0;
+  // A bent target (SceneTarget::bend_radius): the camera centre and the camera-to-plane
+  // rotation in the plane frame, the radius and the grid's geometry.
+  double bend = 0;
+  cv::Matx33d camera_to_plane;
+  cv::Vec3d origin;
+  double half_w = 0, half_h = 0, cell = 0;
 
   // Grid coordinates of ray q, or false when the ray misses the plane's front.
   bool grid(double qx, double qy, double& gx, double& gy) const {
+    if (bend != 0) return cylinder_grid(qx, qy, gx, gy);
     const cv::Matx33d& g = image_to_plane;
     const double w = g(2, 0) * qx + g(2, 1) * qy + g(2, 2);
     if (!(w > 0)) return false;
     gx = (g(0, 0) * qx + g(0, 1) * qy + g(0, 2)) / w;
     gy = (g(1, 0) * qx + g(1, 1) * qy + g(1, 2)) / w;
     return true;
+  }
+
+  // The ray meets the cylinder at up to two points in front of the camera; the one on
+  // the sheet is taken (the nearer if both are), else the one nearest the sheet's arc,
+  // so that the half-plane codes below stay consistent between neighbouring rays.
+  bool cylinder_grid(double qx, double qy, double& gx, double& gy) const {
+    gx = gy = -1;
+    const cv::Vec3d d = camera_to_plane * cv::Vec3d(qx, qy, 1);
+    const double r = bend, ox = origin[0], oz = origin[2] - r;
+    const double a = d[0] * d[0] + d[2] * d[2], b = ox * d[0] + oz * d[2], c = ox * ox + oz * oz - r * r;
+    const double disc = b * b - a * c;
+    if (!(a > 0) || !(disc >= 0)) return false;
+    const double root = std::sqrt(disc);
+    bool any = false;
+    double best = 0;
+    for (const double lambda : {(-b - root) / a, (-b + root) / a}) {
+      if (!(lambda > 0)) continue;
+      const cv::Vec3d p = origin + lambda * d;
+      const double theta = std::atan2(p[0] / r, (r - p[2]) / r);
+      const double x = (r * theta + half_w) / cell, y = (p[1] + half_h) / cell;
+      const bool on = x >= 0 && x < cols && y >= 0 && y < rows;
+      if (!any || on || std::abs(theta) < best) gx = x, gy = y, best = on ? -1 : std::abs(theta);
+      any = true;
+      if (on) break;
+    }
+    return any;
   }
 
   int code(double qx, double qy) const {
@@ -60,7 +94,23 @@ PlaneMap plane_map(const SceneTarget& t) {
   m.image_to_plane = h.inv();
   m.cols = t.albedo.cols;
   m.rows = t.albedo.rows;
+  if (t.bend_radius != 0) {
+    if (!(std::abs(t.bend_radius) * CV_PI > half_w))
+      throw std::invalid_argument("a bent target's radius must exceed its half width / pi");
+    m.bend = t.bend_radius;
+    m.camera_to_plane = r.t();
+    m.origin = -(r.t() * t.tvec);
+    m.half_w = half_w, m.half_h = half_h, m.cell = t.cell_size;
+  }
   return m;
+}
+
+// A point of a target's grid (metres from its centre, in the plane) in the plane frame:
+// on the cylinder for a bent target.
+cv::Vec3d on_target(const SceneTarget& t, double x, double y) {
+  if (t.bend_radius == 0) return {x, y, 0};
+  const double r = t.bend_radius, theta = x / r;
+  return {r * std::sin(theta), y, r * (1 - std::cos(theta))};
 }
 
 // The image rectangle a target can touch (whole frame if it crosses the camera plane).
@@ -69,12 +119,13 @@ cv::Rect footprint(const Camera& cam, const SceneTarget& t, cv::Size size) {
   cv::Rodrigues(t.rvec, r);
   const double hw = t.albedo.cols * t.cell_size / 2, hh = t.albedo.rows * t.cell_size / 2;
   std::vector<cv::Point3d> pts;
-  const int steps = cam.has_distortion() ? 32 : 1;  // distortion bends the edges
+  // Distortion and bending bend the edges.
+  const int steps = cam.has_distortion() || t.bend_radius != 0 ? 32 : 1;
   for (int i = 0; i <= steps; ++i) {
     const double f = double(i) / steps;
-    for (cv::Point3d p : {cv::Point3d(-hw + 2 * hw * f, -hh, 0), cv::Point3d(hw, -hh + 2 * hh * f, 0),
-                          cv::Point3d(hw - 2 * hw * f, hh, 0), cv::Point3d(-hw, hh - 2 * hh * f, 0)}) {
-      const cv::Vec3d c = r * cv::Vec3d(p.x, p.y, p.z) + t.tvec;
+    for (cv::Point2d p : {cv::Point2d(-hw + 2 * hw * f, -hh), cv::Point2d(hw, -hh + 2 * hh * f),
+                          cv::Point2d(hw - 2 * hw * f, hh), cv::Point2d(-hw, hh - 2 * hh * f)}) {
+      const cv::Vec3d c = r * on_target(t, p.x, p.y) + t.tvec;
       if (c[2] <= 1e-9) return cv::Rect(cv::Point(0, 0), size);
       pts.emplace_back(c[0], c[1], c[2]);
     }
@@ -231,6 +282,20 @@ SceneRenderer::SceneRenderer(SceneParams p) : params_(std::move(p)) {
         corner_rays_(y, x) = cv::Vec2f(float((x - 0.5 - cam.cx) / cam.fx), float((y - 0.5 - cam.cy) / cam.fy));
   }
 
+  fit_background();
+
+  light_.create(h, w);
+  const double a = params_.light_angle_deg * CV_PI / 180, ca = std::cos(a), sa = std::sin(a);
+  const double extent = std::abs(w * ca) + std::abs(h * sa);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const double along = ((x - w / 2.0) * ca + (y - h / 2.0) * sa) / extent;  // -0.5 .. 0.5
+      light_(y, x) = float(255.0 * params_.exposure * (1.0 + params_.light_gradient * along));
+    }
+}
+
+void SceneRenderer::fit_background() {
+  const int w = params_.camera.width, h = params_.camera.height;
   if (!params_.photo.empty()) {
     cv::Mat grey;
     if (params_.photo.channels() == 3) cv::cvtColor(params_.photo, grey, cv::COLOR_BGR2GRAY);
@@ -245,15 +310,14 @@ SceneRenderer::SceneRenderer(SceneParams p) : params_(std::move(p)) {
   } else {
     background_ = cv::Mat1f(h, w, float(params_.background));
   }
+}
 
-  light_.create(h, w);
-  const double a = params_.light_angle_deg * CV_PI / 180, ca = std::cos(a), sa = std::sin(a);
-  const double extent = std::abs(w * ca) + std::abs(h * sa);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      const double along = ((x - w / 2.0) * ca + (y - h / 2.0) * sa) / extent;  // -0.5 .. 0.5
-      light_(y, x) = float(255.0 * params_.exposure * (1.0 + params_.light_gradient * along));
-    }
+SceneRenderer SceneRenderer::with_photo(cv::Mat photo) const {
+  SceneRenderer r = *this;  // shares the traced pixel corners and the light
+  r.params_.photo = std::move(photo);
+  r.background_ = cv::Mat1f();  // a buffer of its own, not the one shared with *this
+  r.fit_background();
+  return r;
 }
 
 cv::Mat1f SceneRenderer::render_linear(const std::vector<SceneTarget>& targets) const {

@@ -64,6 +64,13 @@ struct SceneTarget {
   cv::Mat1f albedo;
   double cell_size = 0;
   cv::Vec3d rvec, tvec;
+  // Not 0: the grid is bent onto a cylinder of this radius (metres) whose axis is
+  // parallel to the plane's y axis, keeping its arc length along x (a sheet wrapped
+  // round a pipe). Positive: the axis lies on the +z side, so the centre bulges
+  // towards a camera the sheet faces; negative: the sides come towards it. The plane
+  // frame is the tangent plane at the grid's centre. |bend_radius| must exceed half the
+  // grid's width divided by pi.
+  double bend_radius = 0;
 };
 
 // The rotation vector (marker frame -> camera frame) of a marker that faces the camera
@@ -124,6 +131,10 @@ class SceneRenderer {
  public:
   explicit SceneRenderer(SceneParams params);
   const SceneParams& params() const { return params_; }
+  // The same renderer over another background photo (params.photo): the pixel corners
+  // traced back through the camera are shared, not traced again, so that the frames of
+  // a video through a distorted lens cost what an undistorted one's do.
+  SceneRenderer with_photo(cv::Mat photo) const;
   // Targets are drawn far to near. `seed` replaces params.seed for the noise when non-zero.
   cv::Mat1b render(const std::vector<SceneTarget>& targets, std::uint64_t seed = 0) const;
   // The same without quantisation to 8 bits and without noise: grey levels 0..255.
@@ -134,6 +145,8 @@ class SceneRenderer {
   cv::Mat1b quantize(const cv::Mat1f& linear, std::uint64_t seed = 0) const;
 
  private:
+  void fit_background();  // background_ from params_.photo or params_.background
+
   SceneParams params_;
   cv::Mat2f corner_rays_;  // normalised image coordinates at the pixel corners
   cv::Mat1f background_;   // albedo per pixel
