@@ -1294,6 +1294,18 @@ GST_END_TEST;
 
 // The per-frame budget: a property with the library's default; the first frame it cuts
 // posts one warning for the stream, later cuts none; frames within it, none.
+// The warnings `launch` posts before its EOS, each of which must say `needle`.
+static std::size_t stream_warnings(const std::string& launch, const char* needle) {
+  std::vector<GstMessage*> messages = run_to_eos(launch, GST_MESSAGE_WARNING);
+  for (GstMessage* m : messages) {
+    GError* error = nullptr;
+    gst_message_parse_warning(m, &error, nullptr);
+    fail_unless(std::string(error->message).find(needle) != std::string::npos, "%s", error->message);
+    g_error_free(error);
+  }
+  return count_and_free(messages);
+}
+
 GST_START_TEST(test_budget_warning) {
   GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
   gint budget = 0;
@@ -1304,15 +1316,8 @@ GST_START_TEST(test_budget_warning) {
   gst_object_unref(e);
 
   auto warnings = [](const std::string& properties) {
-    std::vector<GstMessage*> messages = run_to_eos(
-        "lftagtestsrc count=3 num-buffers=10 ! lftagdetect " + properties + " ! fakesink", GST_MESSAGE_WARNING);
-    for (GstMessage* m : messages) {
-      GError* error = nullptr;
-      gst_message_parse_warning(m, &error, nullptr);
-      fail_unless(std::string(error->message).find("max-candidates=1") != std::string::npos, "%s", error->message);
-      g_error_free(error);
-    }
-    return count_and_free(messages);
+    return stream_warnings("lftagtestsrc count=3 num-buffers=10 ! lftagdetect " + properties + " ! fakesink",
+                           "max-candidates=1");
   };
   // Three markers a frame: a budget of one cuts all ten frames, and warns once.
   fail_unless_equals_int(warnings("max-candidates=1"), 1);
@@ -1336,15 +1341,8 @@ GST_START_TEST(test_deadline_warning) {
   gst_object_unref(e);
 
   auto warnings = [](const std::string& properties) {
-    std::vector<GstMessage*> messages = run_to_eos(
-        "lftagtestsrc count=3 num-buffers=10 ! lftagdetect " + properties + " ! fakesink", GST_MESSAGE_WARNING);
-    for (GstMessage* m : messages) {
-      GError* error = nullptr;
-      gst_message_parse_warning(m, &error, nullptr);
-      fail_unless(std::string(error->message).find("deadline=0.001 ms") != std::string::npos, "%s", error->message);
-      g_error_free(error);
-    }
-    return count_and_free(messages);
+    return stream_warnings("lftagtestsrc count=3 num-buffers=10 ! lftagdetect " + properties + " ! fakesink",
+                           "deadline=0.001 ms");
   };
   // A microsecond cuts every frame's second look, and warns once; without a deadline
   // nothing does.

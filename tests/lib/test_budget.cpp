@@ -186,9 +186,15 @@ TEST(Budget, TheDefaultNeverCutsAnOrdinaryScene) {
   EXPECT_EQ(found_of(check(scene.image, "sheet of 48"), sheet), 48);
 }
 
-TEST(Budget, TheSecondLookSharesTheBudget) {
-  // A near marker takes the frame's only candidate; the far one, which only a second
-  // look finds, is then not looked for, and the skipped look is counted.
+namespace {
+
+// A near 3x3 marker (id 1234) the frame's own candidates find and a far one (4321) that
+// only a second look finds, in the paper's camera, with the detector's parameters for it.
+struct NearAndFar {
+  RenderedScene scene;
+  DetectorParams params;
+};
+NearAndFar near_and_far() {
   SceneParams p;
   p.camera = lftag::test::paper_camera();
   SceneMarker near, far;
@@ -197,11 +203,20 @@ TEST(Budget, TheSecondLookSharesTheBudget) {
   far.id = 4321;
   far.margin_units = 6;
   far.tvec = {1.5, 0.3, 22};
-  const RenderedScene scene = render_scene(p, {near, far});
-  DetectorParams params;
-  params.families = {Family(3)};
-  params.camera = p.camera;
-  params.tag_size = 1.0;
+  NearAndFar out{render_scene(p, {near, far}), {}};
+  out.params.families = {Family(3)};
+  out.params.camera = p.camera;
+  out.params.tag_size = 1.0;
+  return out;
+}
+
+}  // namespace
+
+TEST(Budget, TheSecondLookSharesTheBudget) {
+  // The near marker takes the frame's only candidate; the far one is then not looked
+  // for, and the skipped look is counted.
+  const auto [scene, initial] = near_and_far();
+  DetectorParams params = initial;
   DetectionStats stats;
   const std::vector<Detection> all = Detector(params).detect(ImageView(scene.image), &stats);
   ASSERT_EQ(all.size(), 2u) << "the set-up no longer needs a second look";
@@ -235,21 +250,9 @@ TEST(Budget, ParameterIsValidated) {
 }
 
 TEST(Deadline, CutsTheSecondLooksAndNeverAddsADetection) {
-  // A near marker found in the frame, a far one only a second look finds (as in
-  // TheSecondLookSharesTheBudget).
-  SceneParams sp;
-  sp.camera = lftag::test::paper_camera();
-  SceneMarker near, far;
-  near.id = 1234;
-  near.tvec = {-1.0, 0, 8};
-  far.id = 4321;
-  far.margin_units = 6;
-  far.tvec = {1.5, 0.3, 22};
-  const RenderedScene scene = render_scene(sp, {near, far});
-  DetectorParams params;
-  params.families = {Family(3)};
-  params.camera = sp.camera;
-  params.tag_size = 1.0;
+  // The near marker found in the frame, the far one only a second look finds.
+  const auto [scene, initial] = near_and_far();
+  DetectorParams params = initial;
   DetectionStats open_stats;
   const std::vector<Detection> all = Detector(params).detect(ImageView(scene.image), &open_stats);
   ASSERT_EQ(all.size(), 2u) << "the set-up no longer needs a second look";
