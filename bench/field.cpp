@@ -847,9 +847,7 @@ bool run_field(const Options& options) {
   const Plan plan = options.quick ? kQuick : kFull;
   const Sources sources = split_sources(options.data);
   const std::string no_h264 = h264_unavailable();
-  if (!no_h264.empty())
-    progress("field: the H.264 conditions are left out: " + no_h264 +
-             " (apt-get install gstreamer1.0-plugins-ugly gstreamer1.0-libav)");
+  if (!no_h264.empty()) progress("field: the H.264 conditions are left out: " + no_h264);
 
   std::vector<Clip> clips;
   for (int set = 0; set < 2; ++set)

@@ -180,13 +180,18 @@ def video_bins_table(results):
 
 
 def adversarial_table(results):
+    def value(r, key, spec):
+        # Files of runs before a column existed (docs/results' adversarial.csv predates the
+        # deadline's columns) show "-" there.
+        return format(float(r[key]), spec) if r.get(key) else "-"
+
     rows = []
     for r in read(results, "adversarial.csv"):
         found = f"{r['found']}/{r['markers']}" + ("" if r["all_found"] == "1" else " (missed)")
-        rows.append([r["config"], r["variant"], f"{float(r['median_ms']):.1f}", f"{float(r['mean_ms']):.1f}",
-                     f"{float(r['p99_ms']):.1f}", f"{float(r['max_ms']):.1f}", f"{float(r['ratio']):.1f}",
-                     f"{float(r['candidates']):,.0f}", f"{float(r['examined']):,.0f}",
-                     f"{float(r['skipped_by_budget']):,.0f}", f"{float(r['past_deadline']):.2f}", found, r["wrong"]])
+        rows.append([r["config"], r["variant"], value(r, "median_ms", ".1f"), value(r, "mean_ms", ".1f"),
+                     value(r, "p99_ms", ".1f"), value(r, "max_ms", ".1f"), value(r, "ratio", ".1f"),
+                     value(r, "candidates", ",.0f"), value(r, "examined", ",.0f"),
+                     value(r, "skipped_by_budget", ",.0f"), value(r, "past_deadline", ".2f"), found, r["wrong"]])
     return table(["set-up", "frame", "median ms", "mean ms", "p99 ms", "max ms", "x ordinary", "candidates",
                   "examined", "skipped by budget", "frames cut by deadline", "markers found", "other detections"],
                  rows)
