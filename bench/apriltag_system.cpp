@@ -69,6 +69,8 @@ std::vector<Detected> AprilTagSystem::detect(const cv::Mat1b& grey) {
     zarray_get(found, i, &d);
     Detected det;
     det.id = std::to_string(d->id);
+    det.confidence = d->decision_margin;
+    det.path = "quad";
     // AprilTag puts pixel centres at +0.5 and lists the corners from the marker's
     // bottom-left; convert to OpenCV's convention, clockwise from the top-left.
     for (int k : {3, 2, 1, 0}) det.points.emplace_back(d->p[k][0] - 0.5, d->p[k][1] - 0.5);

@@ -20,6 +20,7 @@ struct Options {
   int threads = 1;                      // worker threads (never used for timing)
   std::uint64_t seed = 1;
   std::filesystem::path save_misses;   // when set: the video and range frames where a system missed a marker
+  std::vector<std::string> conditions;  // the field experiment's conditions to run (empty: all)
 };
 
 // An experiment writes its CSV files into options.out and returns false when a check it

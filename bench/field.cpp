@@ -849,9 +849,20 @@ bool run_field(const Options& options) {
   const std::string no_h264 = h264_unavailable();
   if (!no_h264.empty()) progress("field: the H.264 conditions are left out: " + no_h264);
 
+  std::vector<bool> chosen(kConditions, options.conditions.empty());
+  for (const std::string& name : options.conditions) {
+    const auto info = std::find_if(std::begin(kInfo), std::end(kInfo), [&](const ConditionInfo& i) { return name == i.name; });
+    if (info == std::end(kInfo)) {
+      std::string known;
+      for (const ConditionInfo& i : kInfo) known += std::string(known.empty() ? "" : ", ") + i.name;
+      throw std::invalid_argument("field: unknown condition '" + name + "' (known: " + known + ")");
+    }
+    chosen[std::size_t(info - std::begin(kInfo))] = true;
+  }
   std::vector<Clip> clips;
   for (int set = 0; set < 2; ++set)
     for (int condition = 0; condition < kConditions; ++condition) {
+      if (!chosen[std::size_t(condition)]) continue;
       if ((condition == kH264 || condition == kH264Small) && !no_h264.empty()) continue;
       for (int i = 0; i < plan.clips; ++i)
         clips.push_back(plan_clip(sources, set, condition, i, plan.frames, options.seed));
@@ -897,6 +908,8 @@ bool run_field(const Options& options) {
   std::vector<std::vector<std::vector<Truth>>> truths(clips.size());
   std::vector<std::vector<std::vector<std::vector<Seen>>>> seen(clips.size());
   std::vector<std::vector<std::vector<std::vector<Wrong>>>> wrongs(clips.size());
+  // [clip][frame][system] every detection, for the confidences of right and wrong ids.
+  std::vector<std::vector<std::vector<std::vector<Detected>>>> detections(clips.size());
   int done = 0;
   // The quick plan's few frames are kept for the timing instead of being drawn again.
   const bool keep = options.quick;
@@ -912,19 +925,20 @@ bool run_field(const Options& options) {
     truths[ci].resize(c.frames);
     seen[ci].assign(c.frames, std::vector<std::vector<Seen>>(n));
     wrongs[ci].assign(c.frames, std::vector<std::vector<Wrong>>(n));
+    detections[ci].assign(c.frames, std::vector<std::vector<Detected>>(n));
     for (int f = 0; f < c.frames; ++f) {
       truths[ci][f] = truth_of(c, f);
       for (int s = 0; s < n; ++s) {
         const std::vector<std::string> fid = frame_ids(c, s);
-        seen[ci][f][s] = score_frame(systems[s]->detect(images[s][f]), c, f, fid, wrongs[ci][f][s]);
+        detections[ci][f][s] = systems[s]->detect(images[s][f]);
+        seen[ci][f][s] = score_frame(detections[ci][f][s], c, f, fid, wrongs[ci][f][s]);
         if (options.save_misses.empty()) continue;
-        for (std::size_t m = 0; m < fid.size(); ++m)
-          if (!seen[ci][f][s][m].found && truths[ci][f][m].subset == kVisible) {
-            const std::string name = options.systems[s] + "-field-" + kSets[c.set] + "-" + kInfo[c.condition].name +
-                                     "-clip" + std::to_string(c.index) + "-frame" + std::to_string(f) + ".png";
-            cv::imwrite((options.save_misses / name).string(), images[s][f]);
-            break;
-          }
+        bool missed = false;
+        for (std::size_t m = 0; m < fid.size(); ++m) missed |= !seen[ci][f][s][m].found && truths[ci][f][m].subset == kVisible;
+        const std::string name = options.systems[s] + "-field-" + kSets[c.set] + "-" + kInfo[c.condition].name +
+                                 "-clip" + std::to_string(c.index) + "-frame" + std::to_string(f);
+        if (missed) cv::imwrite((options.save_misses / (name + ".png")).string(), images[s][f]);
+        if (!wrongs[ci][f][s].empty()) cv::imwrite((options.save_misses / (name + "-wrong.png")).string(), images[s][f]);
       }
     }
     std::lock_guard<std::mutex> lock(mutex);
@@ -1049,6 +1063,19 @@ bool run_field(const Options& options) {
   Csv wrong_csv(options.out / "field_wrong.csv",
                 {"system", "family", "set", "condition", "clip", "frame", "id", "x", "y", "nearest_marker",
                  "nearest_id", "nearest_subset", "nearest_edge_px", "distance_edges"});
+  // Every detection with the system's confidence in it: where a bound on it would stop the
+  // wrong ids, and what it would cost (choose it on the tuning set, check it on the other).
+  Csv detections_csv(options.out / "field_detections.csv",
+                     {"system", "family", "set", "condition", "clip", "frame", "id", "right", "path", "confidence"});
+  for (int s = 0; s < n; ++s)
+    for (std::size_t ci = 0; ci < clips.size(); ++ci) {
+      const Clip& c = clips[ci];
+      const std::vector<std::string> fid = frame_ids(c, s);
+      for (int f = 0; f < c.frames; ++f)
+        for (const Detected& d : detections[ci][f][s])
+          detections_csv.row(options.systems[s], families[s], kSets[c.set], kInfo[c.condition].name, c.index, f, d.id,
+                             int(std::find(fid.begin(), fid.end(), d.id) != fid.end()), d.path, d.confidence);
+    }
   struct Tally {
     int frames = 0, markers = 0, found = 0, wrong = 0;
     std::vector<double> translation_pct, rotation_deg;

@@ -39,6 +39,8 @@ std::vector<Detected> LftagSystem::detect(const cv::Mat1b& grey) {
     det.points.assign(d.keypoints.begin(), d.keypoints.end());
     det.center = d.center;
     det.pose = Pose{d.rvec, d.tvec};
+    det.confidence = d.noise_margin;
+    det.path = d.from_outline ? "outline" : "topology";
     out.push_back(std::move(det));
   }
   stats_ += stats;

@@ -35,7 +35,7 @@ int run(int argc, char** argv) {
   CLI::App app("Benchmarks of fiducial systems on the same rendered and real frames.");
   bench::Options options;
   std::vector<std::string> names;
-  std::string systems, save_misses, out = "bench-results", data = "/usr/share/doc/opencv-doc/examples/data";
+  std::string systems, conditions, save_misses, out = "bench-results", data = "/usr/share/doc/opencv-doc/examples/data";
   bool list = false;
   options.threads = int(std::max(1u, std::thread::hardware_concurrency()));
   app.add_option("experiments", names, "Experiments to run (default: all; see --list)");
@@ -47,7 +47,10 @@ int run(int argc, char** argv) {
       ->check(CLI::Range(1, 64));
   app.add_option("--seed", options.seed, "Seed of every random choice (default 1)");
   app.add_option("--save-misses", save_misses,
-                 "Write each video or range frame where a system missed a marker to this directory (PNG)");
+                 "Write each video, range or field frame where a system missed a marker (field: or read a wrong id) "
+                 "to this directory (PNG)");
+  app.add_option("--conditions", conditions,
+                 "Comma-separated conditions of the field experiment (default: all)");
   app.add_flag("--list", list, "List experiments and systems, then exit");
   CLI11_PARSE(app, argc, argv);
 
@@ -67,6 +70,11 @@ int run(int argc, char** argv) {
   options.out = out;
   options.data = data;
   options.save_misses = save_misses;
+  for (std::size_t start = 0; !conditions.empty() && start <= conditions.size();) {
+    const std::size_t comma = std::min(conditions.find(',', start), conditions.size());
+    options.conditions.push_back(conditions.substr(start, comma - start));
+    start = comma + 1;
+  }
   std::filesystem::create_directories(options.out);
   if (!save_misses.empty()) std::filesystem::create_directories(save_misses);
   // OpenCV's own threads would blur timings and compete with ours.

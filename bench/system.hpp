@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <utility>
@@ -26,6 +27,10 @@ struct Detected {
   std::vector<cv::Point2d> points;  // what the system localises: quad corners or key points
   cv::Point2d center;               // the marker centre in the image
   std::optional<Pose> pose;
+  // The system's own measure of how sure the id is (LFTag: Detection::noise_margin;
+  // AprilTag: decision_margin), and which of its paths read it; NaN and empty when none.
+  double confidence = std::numeric_limits<double>::quiet_NaN();
+  std::string path;
 };
 
 // White margin around every system's marker, as a fraction of the tag size (two cells of

@@ -60,6 +60,7 @@ void DetectorParams::validate() const {
   if (!(max_cell_residual > 0 && max_cell_residual <= 1)) fail("the cell residual bound must be in (0, 1] units");
   if (!(max_ink_spread >= 1)) fail("the ink spread bound must be at least 1");
   if (!(min_decode_margin >= 1)) fail("the decoding margin must be at least 1");
+  if (!(min_noise_margin >= 0)) fail("the noise margin must be at least 0");
   if (!(min_pixels_per_unit >= 0 && min_pixels_per_unit < 100)) fail("the minimum pixels per unit must be in [0, 100)");
   for (double t : max_decode_error)
     if (!(t >= 0) || !std::isfinite(t)) fail("decode error thresholds (tau3) must be finite and not negative");
@@ -182,7 +183,9 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
                 : best->verdict == detail::Verdict::resolution ? Stage::resolution
                                                                : Stage::decoding;
       CandidateVerdict v = verdict_of(c, second_look, stage);
-      if (best) v.reading = best->id, v.decode_error = best->error, v.worst_cell = best->worst_cell;
+      if (best)
+        v.reading = best->id, v.decode_error = best->error, v.worst_cell = best->worst_cell,
+        v.noise_margin = best->noise_margin;
       trace->verdicts.push_back(std::move(v));
     }
     if (!d) continue;
@@ -194,6 +197,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     det.id = d->id;
     det.decode_error = d->error;
     det.worst_cell = d->worst_cell;
+    det.noise_margin = d->noise_margin;
     det.ink_spread = d->ink_spread;
     det.edge_score = d->edge_score;
     // The pose's centroids: each square's ink over its window under the decoding's
@@ -258,6 +262,7 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
           if (reading->read) verdict->reading = reading->id;
           verdict->correlation = reading->correlation, verdict->marker_correlation = reading->marker_correlation;
           verdict->contrast = reading->contrast, verdict->margin = reading->margin;
+          verdict->noise_margin = reading->noise_margin;
           verdict->pixels_per_unit = reading->pixels_per_unit, verdict->smear = reading->smear;
           verdict->defocus = reading->defocus;
         }
@@ -290,6 +295,7 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
       det.id = d.id;
       det.centroids = observed;
       det.from_outline = true;
+      det.noise_margin = reading->noise_margin;
       const std::array<int, 4> keypoint_cells = f.keypoint_cells();
       for (int i = 0; i < 4; ++i) det.keypoints[i] = observed[keypoint_cells[i]];
       if (!detail::estimate_pose(c, d, camera, p, det)) {

@@ -32,7 +32,7 @@ constexpr std::array<double, 3> kDefocusUnits = {0.7, 1.1, 1.5};
 // A defocused reading's least worsening of the fit, over its residuals' variance: a
 // runner-up 5 standard deviations of the noise away. Measured: true readings 17 to 900,
 // misreadings of dim (25 grey levels) defocused markers 7 to 10.
-constexpr double kMinNoiseMargin = 25;
+constexpr double kMinDefocusGainOverVariance = 25;
 // From this ratio of a defocus's longest axis in the template to its geometric mean
 // (1 / sqrt(cos tilt): tilts of about 37 degrees), the defocus is sought uneven.
 constexpr double kMinDefocusStretch = 1.12;
@@ -607,9 +607,9 @@ class PixelModel {
     TagId id;
     double margin = 0;
     double smear = 0;  // length of the motion blur that fits best, frame pixels
-    // The same least worsening over the variance of the best fit's residuals (noise and
-    // misfit): how far above what the frame's noise can do alone the reading stands.
-    double noise_margin = 0;
+    // The least worsening over the variance of the best fit's residuals (noise and misfit).
+    double gain_over_variance = 0;
+    double noise_margin = 0;  // OutlineReading::noise_margin
   };
 
   // The id whose predicted pixels fit the grey levels best (least squares with the
@@ -618,7 +618,7 @@ class PixelModel {
   // least margin over the data cells: how much worse the runner-up position of its square
   // fits, per pixel of a cell over the contrast squared.
   Reading read(TagId start, double pixels_per_unit, double contrast) const {
-    Reading best{start, 0, 0, 0};
+    Reading best{start, 0, 0, 0, 0};
     double best_rss = std::numeric_limits<double>::infinity();
     const bool smeared = smear_ != cv::Point2d();
     // With a motion blur, which dominates, only the lesser optical blurs are tried.
@@ -639,7 +639,8 @@ class PixelModel {
         if (fit.rss < best_rss) {
           best_rss = fit.rss;
           best = {fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
-                  cv::norm(smear_) * scale, fit.rss > 0 ? fit.least_gain / (fit.rss / fit.samples) : 0};
+                  cv::norm(smear_) * scale, fit.rss > 0 ? fit.least_gain / (fit.rss / fit.samples) : 0,
+                  fit.noise_margin};
           if (!(fit.ink > 0.4 * contrast)) best.margin = 0;
         }
       }
@@ -667,7 +668,26 @@ class PixelModel {
   struct Fit {
     TagId id;
     double rss = 0, ink = 0, least_gain = 0, samples = 0;
+    double noise_margin = 0;  // Reading::noise_margin
   };
+
+  // The variance of sum(delta * noise) over a rectangle of pixels, in units of the noise's
+  // own variance, for noise correlated by rho_x^|dx| rho_y^|dy| between pixels:
+  // delta' K delta, with K applied as two exponential filters each way (exact, linear).
+  static double correlated_power(cv::Mat1d delta, double rho_x, double rho_y) {
+    const cv::Mat1d original = delta.clone();
+    const auto filter = [](double* v, int n, std::ptrdiff_t step, double rho) {
+      if (rho <= 0 || n < 2) return;
+      std::vector<double> forward(static_cast<std::size_t>(n)), backward(static_cast<std::size_t>(n));
+      for (int k = 0; k < n; ++k) forward[std::size_t(k)] = v[k * step] + (k ? rho * forward[std::size_t(k - 1)] : 0);
+      for (int k = n - 1; k >= 0; --k)
+        backward[std::size_t(k)] = v[k * step] + (k < n - 1 ? rho * backward[std::size_t(k + 1)] : 0);
+      for (int k = 0; k < n; ++k) v[k * step] = forward[std::size_t(k)] + backward[std::size_t(k)] - v[k * step];
+    };
+    for (int y = 0; y < delta.rows; ++y) filter(delta.ptr<double>(y), delta.cols, 1, rho_x);
+    for (int x = 0; x < delta.cols; ++x) filter(delta.ptr<double>(0) + x, delta.rows, delta.cols, rho_y);
+    return original.dot(delta);
+  }
 
   // The fit from `start` with the coverage (`fixed`, `smeared_squares`: smeared already)
   // blurred by a Gaussian of `sigma` pixels.
@@ -726,13 +746,53 @@ class PixelModel {
     Fit fit;
     fit.rss = sums.rss(&fit.ink);
     fit.samples = sums.n;
-
     fit.least_gain = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < cells_.size(); ++i) {
       for (int d = 0; d < 4; ++d)
         if (d != digit[i]) fit.least_gain = std::min(fit.least_gain, moved(i, d).rss() - fit.rss);
       fit.id = fit.id.with_digit(family_.data_index(cells_[i]), digit[i]);
     }
+
+    // The noise margin. With grey = prediction + noise, moving a square changes the
+    // prediction by p = ink * delta (delta: the change of its coverage), and the fit worsens
+    // by |p|^2 on average, give or take 2 sqrt(p' C p) (C: the noise's covariance): the
+    // runner-up stands gain / (2 sqrt(p' C p)) standard deviations away. C is measured on
+    // the residuals: their variance (at least the 1/12 of 8-bit rounding) and their
+    // correlation between neighbours each way, for blur, a codec's blocks and the model's
+    // misfit leave them smooth, and smooth noise moves a square's pixels together.
+    const double vc = sums.cc - sums.c * sums.c / sums.n, cov = sums.gc - sums.g * sums.c / sums.n;
+    const double slope = vc > 0 && cov < 0 ? cov / vc : 0, mg = sums.g / sums.n, mc = sums.c / sums.n;
+    const auto residual = [&](int y, int x) { return grey_(y, x) - mg - slope * (total(y, x) - mc); };
+    double rr = 0, across = 0, down = 0;
+    int pairs_across = 0, pairs_down = 0;
+    for (int y = 0; y < total.rows; ++y)
+      for (int x = 0; x < total.cols; ++x) {
+        if (!use_(y, x)) continue;
+        const double r = residual(y, x);
+        rr += r * r;
+        if (x + 1 < total.cols && use_(y, x + 1)) across += r * residual(y, x + 1), ++pairs_across;
+        if (y + 1 < total.rows && use_(y + 1, x)) down += r * residual(y + 1, x), ++pairs_down;
+      }
+    const double variance = std::max(rr / sums.n, 1.0 / 12);
+    const auto correlation = [&](double sum, int pairs) {
+      return rr > 0 && pairs > 0 ? std::clamp(sum / pairs / (rr / sums.n), 0.0, 0.95) : 0.0;
+    };
+    const double rho_x = correlation(across, pairs_across), rho_y = correlation(down, pairs_down);
+    fit.noise_margin = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < cells_.size(); ++i) {
+      const cv::Rect& r = squares_[i][0].rect;
+      for (int d = 0; d < 4; ++d) {
+        if (d == digit[i]) continue;
+        cv::Mat1d delta(r.size(), 0.0);
+        for (int y = 0; y < r.height; ++y)
+          for (int x = 0; x < r.width; ++x)
+            if (use_(r.y + y, r.x + x)) delta(y, x) = squares[i][d](y, x) - squares[i][digit[i]](y, x);
+        const double spread = fit.ink * fit.ink * variance * correlated_power(delta, rho_x, rho_y);
+        const double gain = moved(i, d).rss() - fit.rss;
+        fit.noise_margin = std::min(fit.noise_margin, spread > 0 ? gain / (2 * std::sqrt(spread)) : 0.0);
+      }
+    }
+    if (!std::isfinite(fit.noise_margin)) fit.noise_margin = 0;
     return fit;
   }
 
@@ -1238,7 +1298,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // Under a defocus found the contrast seen collapses, and a margin measured against it
   // says little: the reading must also stand clear of the frame's noise.
   const auto margin_of = [&](const PixelModel::Reading& r) {
-    return defocus > 0 && r.noise_margin < kMinNoiseMargin ? 0.0 : r.margin;
+    return defocus > 0 && r.gain_over_variance < kMinDefocusGainOverVariance ? 0.0 : r.margin;
   };
   if (deadline.passed()) return cut(out);
   const auto reading = read_id(h);
@@ -1246,6 +1306,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   out.read = true;
   out.id = reading->id;
   out.margin = margin_of(*reading);
+  out.noise_margin = reading->noise_margin;
   out.smear = reading->smear / out.pixels_per_unit;
 
   // The final homography: the whole marker of the id read, every square in place, aligned
@@ -1286,14 +1347,16 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     if (!again) return std::nullopt;
     if (again->id == out.id) {
       out.margin = std::min(out.margin, margin_of(*again));
+      out.noise_margin = std::min(out.noise_margin, again->noise_margin);
       out.smear = std::max(out.smear, again->smear / out.pixels_per_unit);
       return out;
     }
     out.id = again->id;
     out.margin = margin_of(*again);
+    out.noise_margin = again->noise_margin;
     out.smear = again->smear / out.pixels_per_unit;
   }
-  out.margin = 0;  // the reading never settled
+  out.margin = out.noise_margin = 0;  // the reading never settled
   return out;
 }
 

@@ -288,6 +288,9 @@ struct OutlineReading {
   double margin = 0;             // least, over the data cells, of how much worse the runner-up
                                  // square position fits than the best: mean squared grey
                                  // difference per sample over the contrast squared
+  double noise_margin = 0;       // standard deviations of the fit's residuals by which the
+                                 // least certain cell stands from another digit (least of
+                                 // the readings made; see Detection::noise_margin)
   double baseline_gap = 0;       // how much more the two baseline corners look like baselines
                                  // than the other two (0..1 of the contrast)
   double pixels_per_unit = 0;    // along the most foreshortened direction, at the centre
@@ -365,6 +368,7 @@ struct Decoding {
   // homography fitted to all n^2 blobs: about 1 for the marker's true turn, about 2 to 3
   // when the baseline is taken on another side.
   double ink_spread = 0;
+  double noise_margin = 0;          // Detection::noise_margin (filled once every other check passed)
 };
 
 // Tries the 16 key point hypotheses and returns the best one with its verdict and its ink

@@ -48,6 +48,7 @@ nlohmann::json verdict_json(const CandidateVerdict& v) {
     out["reading"] = id_json(*v.reading);
     out["decode_error"] = v.decode_error;
     out["worst_cell"] = v.worst_cell;
+    out["noise_margin"] = v.noise_margin;
   }
   return out;
 }
@@ -61,6 +62,7 @@ nlohmann::json outline_json(const OutlineVerdict& v) {
                         {"marker_correlation", v.marker_correlation},
                         {"contrast", v.contrast},
                         {"margin", v.margin},
+                        {"noise_margin", v.noise_margin},
                         {"pixels_per_unit", v.pixels_per_unit},
                         {"smear", v.smear},
                         {"defocus", v.defocus}};

@@ -49,6 +49,7 @@ inline nlohmann::json detection_json(const Detection& d) {
               {"reprojection_error", d.alternative_reprojection_error}}}}},
           {"decode_error", d.decode_error},
           {"worst_cell", d.worst_cell},
+          {"noise_margin", d.noise_margin},
           {"edge_score", d.edge_score},
           {"reprojection_error", d.reprojection_error},
           {"from_outline", d.from_outline}};

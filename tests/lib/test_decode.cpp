@@ -184,6 +184,7 @@ TEST(Decode, TheBaselineOnAnotherSideShowsInTheInkSpread) {
   open.max_cell_residual = 1.0;
   open.min_decode_margin = 1.0;
   open.max_ink_spread = 1e9;
+  open.min_noise_margin = 0;
   for (int n = 2; n <= 8; ++n) open.max_decode_error[n] = 1e6;
   for (const auto& [n, id, ppu] : {std::tuple{3, TagId(6789), 5.3}, std::tuple{4, TagId(98765), 4.0},
                                    std::tuple{6, TagId(424242), 4.2}, std::tuple{2, TagId(7), 6.0},
@@ -252,6 +253,7 @@ TEST(Decode, ABlobHalfwayBetweenTwoPositionsIsRejectedByTheCellResidual) {
   DetectorParams loose;  // the residual bound opened, and no rival-id margin
   loose.max_cell_residual = 0.6;
   loose.min_decode_margin = 1.0;
+  loose.min_noise_margin = 0;
   for (double shift : {0.3, 0.5}) {
     Prepared moved = *p;
     moved.candidate.blobs[p->blob_of_cell[4]].point.x += shift * ppu;
@@ -291,6 +293,66 @@ TEST(Decode, ABlobHalfwayBetweenTwoPositionsIsRejectedByTheCellResidual) {
       EXPECT_EQ(raw->verdict, detail::Verdict::residual) << what;
     }
   }
+}
+
+TEST(Decode, TheNoiseMarginIsTheLeastCellsDistanceFromAnotherDigitInUnitsOfTheBlobsScatter) {
+  // 3x3 id 6789 at 8 px/u, every blob scattered by a fixed pattern of +-0.1 px, and the
+  // centre cell's blob (data cell 2, digit 0) moved right towards digit 2's position, one
+  // unit (8 px) away: the margin is its distance from the halfway line over the scatter.
+  // It falls as the blob nears the line, and past the bound the reading is refused
+  // however well everything else fits: it is a guess between two ids.
+  const Family f(3);
+  const TagId id = 6789;
+  const double ppu = 8;
+  const auto p = prepare_raster(f, id, ppu);
+  ASSERT_TRUE(p);
+  Prepared scattered = *p;
+  for (std::size_t j = 0; j < scattered.candidate.blobs.size(); ++j) {
+    scattered.candidate.blobs[j].point.x += (j % 2 ? 0.1 : -0.1);
+    scattered.candidate.blobs[j].point.y += (j % 3 ? 0.1 : -0.1);
+  }
+  DetectorParams loose;  // the residual bound opened, and no rival-id margin: the noise margin decides
+  loose.max_cell_residual = 0.6;
+  loose.min_decode_margin = 1.0;
+  const auto clean = run(scattered, scattered.keypoints, loose);
+  ASSERT_TRUE(clean);
+  EXPECT_EQ(clean->id, id);
+  EXPECT_GT(clean->noise_margin, 10);  // 4 px from the line, 0.1 px of scatter
+  double previous = clean->noise_margin;
+  for (double shift : {0.1, 0.2, 0.3, 0.4}) {
+    Prepared moved = scattered;
+    moved.candidate.blobs[p->blob_of_cell[4]].point.x += shift * ppu;
+    DetectionStats stats;
+    const auto d = detail::decode(moved.candidate, moved.keypoints, ImageView(moved.image), moved.camera, loose,
+                                  stats, nullptr);
+    const std::string what = "shifted " + std::to_string(shift) + " u";
+    ASSERT_TRUE(d) << what;
+    EXPECT_EQ(d->id, id) << what;
+    if (d->verdict == detail::Verdict::accepted) {
+      EXPECT_GE(d->noise_margin, DetectorParams{}.min_noise_margin) << what;
+      EXPECT_LT(d->noise_margin, previous) << what;
+      previous = d->noise_margin;
+    } else {
+      // Refused for its noise margin alone: the id it would have read is the printed one.
+      EXPECT_EQ(d->verdict, detail::Verdict::margin) << what;
+      EXPECT_LT(d->noise_margin, DetectorParams{}.min_noise_margin) << what;
+      EXPECT_GE(shift, 0.3) << what;
+    }
+  }
+  // Nearly on the line: never accepted, whichever digit it is nearer to.
+  for (double shift : {0.48, 0.52}) {
+    Prepared moved = scattered;
+    moved.candidate.blobs[p->blob_of_cell[4]].point.x += shift * ppu;
+    EXPECT_FALSE(run(moved, moved.keypoints, loose)) << shift;
+  }
+  // Past it, and as far from the line as the small shifts were: the other id, read as
+  // surely (the blob is now digit 2's, 0.2 u from it).
+  Prepared far = scattered;
+  far.candidate.blobs[p->blob_of_cell[4]].point.x += 0.8 * ppu;
+  const auto other = run(far, far.keypoints, loose);
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->id, id.with_digit(2, 2));
+  EXPECT_GE(other->noise_margin, DetectorParams{}.min_noise_margin);
 }
 
 TEST(Decode, AnotherIdWithinTheMarginRejectsTheReading) {

@@ -133,6 +133,14 @@ struct DetectorParams {
   // Reject a reading when a hypothesis giving another id has a decoding error within this
   // factor of the best one's: at the limit of resolution two ids can fit nearly as well.
   double min_decode_margin = 2.0;
+  // A reading of 3x3 and larger by its blobs must have its least certain data cell this
+  // many standard deviations of the blobs' scatter from reading as another digit
+  // (Detection::noise_margin): every digit pattern is an id, so a guessed cell is a wrong
+  // id. In the field experiment (docs/BENCHMARKS.md) the wrong ids of flat markers read
+  // by their blobs had 1.2 to 2.0, and 0.6 % of the right readings were under 2. Outline
+  // readings report their noise margin but are not held to it: there the residual is
+  // mostly the model's misfit, and right readings of blurred markers have 0.7 to 1.4.
+  double min_noise_margin = 2.0;
   // The squares' ink per unit of design area, largest over smallest, under the decoded
   // homography: at most 1.24 for true markers in our renders, from 3 m to the range limit,
   // tilted or blurred; 16/9 when one square has the wrong size, and about 2 to 3 when the
@@ -181,6 +189,14 @@ struct Detection {
   double ink_spread = 0;                 // ink per design area, largest / smallest square
   double edge_score = 0;                 // mean Sobel magnitude along the inner border edge
   double reprojection_error = 0;         // RMS of the final pose over the n^2 centroids, pixels
+  // How sure the id is: how many standard deviations of the noise measured on this marker
+  // its least certain data cell stands from reading as another digit (every digit pattern
+  // is an id, so one cell read wrong is another marker's id). From the blobs' scatter about
+  // the fitted grid (at least DetectorParams::min_noise_margin), or for an outline reading
+  // the grey levels' residual about the fitted marker, correlated between neighbours as
+  // it is (that residual is mostly misfit: right readings of blurred markers show 0.7 to
+  // 1.4). 0 for 2x2 (its four blobs fit exactly; its grey levels decide).
+  double noise_margin = 0;
   // The planar pose has two solutions (IPPE finds both), each refined on the n^2 centroids:
   // the one that fits them best is rvec/tvec, the other is here. A small marker seen
   // nearly face on fits its flip (the marker tilted the other way) almost as well.
@@ -250,7 +266,7 @@ enum class Stage {
   baselines,     // outline read: no two corners stand out as the baselines
   resolution,    // too few pixels per unit to read (min_pixels_per_unit)
   decoding,      // no reading within tau3 and the cell residual bound
-  margin,        // another id fitted within the decoding margin
+  margin,        // another id fitted within the decoding margin, or a digit within the noise of another
   ink,           // the squares' ink did not match the design on any side
   marker,        // outline read: the whole marker of the id read fitted under 0.75
   smear,         // outline read: a motion blur longer than 5 units (cells look alike)
@@ -268,6 +284,7 @@ struct CandidateVerdict {
   Stage stage = Stage::detected;
   std::optional<TagId> reading;         // the best reading, when decoding ran
   double decode_error = 0, worst_cell = 0;  // of that reading
+  double noise_margin = 0;                  // of that reading, once accepted
 };
 
 // One outline read of a second look (a marker whose squares its binary image could not
@@ -284,6 +301,7 @@ struct OutlineVerdict {
   double contrast = 0;                   // white ring minus the cells' cores, grey levels
                                          // (under a defocus: as the template's blur shows it)
   double margin = 0;                     // how much worse each cell's runner-up fits (least)
+  double noise_margin = 0;               // the same in standard deviations of the noise
   double pixels_per_unit = 0;            // along the most foreshortened direction
   double smear = 0;                      // length of the motion blur found, units
   double defocus = 0;                    // Gaussian defocus found, units (sigma)
