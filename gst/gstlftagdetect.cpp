@@ -934,6 +934,37 @@ static gboolean gst_lftag_detect_src_event(GstBaseTransform* trans, GstEvent* ev
   return GST_BASE_TRANSFORM_CLASS(parent_class)->src_event(trans, event);
 }
 
+/* What the per-frame bounds cut in a frame, named by the bound that was hit (the
+ * candidate budget, max-candidates; the second looks' bound; the 32 outline reads),
+ * with only the counts that are not 0: "held more candidate markers than the
+ * per-frame budget allows (max-candidates=1): 2 candidates were skipped, ...". */
+static std::string gst_lftag_detect_budget_text(const lftag::DetectionStats& stats,
+                                                const lftag::DetectorParams& params) {
+  std::vector<std::string> bounds, counts;
+  /* A spent candidate budget also stops the second looks. */
+  if (stats.skipped_by_budget > 0)
+    bounds.push_back("held more candidate markers than the per-frame budget allows (max-candidates=" +
+                     std::to_string(params.max_candidates) + ")");
+  else if (stats.second_looks_skipped > 0)
+    bounds.push_back("needed more second looks than the per-frame bound of " + std::to_string(params.max_second_looks));
+  if (stats.outline_reads_skipped > 0) bounds.push_back("needed more outline reads than the per-frame bound of 32");
+  const auto count = [&](std::int64_t n, const char* one, const char* many) {
+    if (n > 0) counts.push_back(std::to_string(n) + " " + (n == 1 ? one : many));
+  };
+  count(stats.skipped_by_budget, "candidate", "candidates");
+  count(stats.second_looks_skipped, "second look", "second looks");
+  count(stats.outline_reads_skipped, "outline read", "outline reads");
+  const auto join = [](const std::vector<std::string>& items, const char* last) {
+    std::string out;
+    for (std::size_t i = 0; i < items.size(); ++i)
+      out += (i == 0 ? "" : i + 1 == items.size() ? last : ", ") + items[i];
+    return out;
+  };
+  const bool one = counts.size() == 1 && counts[0].compare(0, 2, "1 ") == 0;
+  return join(bounds, " and ") + ": " + join(counts, " and ") + (one ? " was" : " were") +
+         " skipped, the most plausible examined first";
+}
+
 /* Whether downstream's last QoS report makes this buffer late. */
 static bool gst_lftag_detect_is_late(GstLFTagDetect* self, GstBuffer* buffer, gdouble* proportion,
                                      GstClockTimeDiff* jitter) {
@@ -1038,15 +1069,14 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
                  GST_TIME_ARGS(GST_BUFFER_PTS(buffer)));
   if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0 || stats.outline_reads_skipped > 0) &&
       !st.warned_budget) {
+    const std::string text = gst_lftag_detect_budget_text(stats, st.detector->params());
     GST_ELEMENT_WARNING(self, STREAM, FAILED,
-                        ("The frame at %" GST_TIME_FORMAT " held more candidate markers than the "
-                         "per-frame budget allows (max-candidates=%d, 32 outline reads): %" G_GINT64_FORMAT
-                         " candidates, %" G_GINT64_FORMAT " second looks and %" G_GINT64_FORMAT
-                         " outline reads were skipped, the most plausible candidates examined first. "
-                         "Markers may be missed in such frames; this is reported once per stream.",
-                         GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), s.detector.max_candidates, stats.skipped_by_budget,
-                         stats.second_looks_skipped, stats.outline_reads_skipped),
-                        (nullptr));
+                        ("The frame at %" GST_TIME_FORMAT " %s. Markers may be missed in such frames; this is "
+                         "reported once per stream.",
+                         GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), text.c_str()),
+                        ("%" G_GINT64_FORMAT " candidates, %" G_GINT64_FORMAT " second looks and %" G_GINT64_FORMAT
+                         " outline reads skipped",
+                         stats.skipped_by_budget, stats.second_looks_skipped, stats.outline_reads_skipped));
     st.warned_budget = true;
   }
   if (stats.past_deadline > 0 && !st.warned_deadline) {

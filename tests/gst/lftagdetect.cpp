@@ -1317,10 +1317,19 @@ GST_START_TEST(test_budget_warning) {
 
   auto warnings = [](const std::string& properties) {
     return stream_warnings("lftagtestsrc count=3 num-buffers=10 ! lftagdetect " + properties + " ! fakesink",
-                           "max-candidates=1");
+                           "held more candidate markers than the per-frame budget allows (max-candidates=1): ");
   };
-  // Three markers a frame: a budget of one cuts all ten frames, and warns once.
+  // Three markers a frame: a budget of one cuts all ten frames, and warns once, naming
+  // that budget and not the outline reads' bound, which was not hit.
   fail_unless_equals_int(warnings("max-candidates=1"), 1);
+  for (GstMessage* m : run_to_eos("lftagtestsrc count=3 num-buffers=2 ! lftagdetect max-candidates=1 deadline=0 ! fakesink",
+                                  GST_MESSAGE_WARNING)) {
+    GError* error = nullptr;
+    gst_message_parse_warning(m, &error, nullptr);
+    fail_if(std::string(error->message).find("outline") != std::string::npos, "%s", error->message);
+    g_error_free(error);
+    gst_message_unref(m);
+  }
   fail_unless_equals_int(warnings(""), 0);
   fail_unless_equals_int(warnings("max-candidates=0"), 0);
 
@@ -1387,8 +1396,11 @@ GST_START_TEST(test_outline_bound_warning) {
       GError* error = nullptr;
       gst_message_parse_warning(m, &error, nullptr);
       const std::string text = error->message;
-      fail_unless(text.find("outline reads were skipped") != std::string::npos &&
-                      text.find(" and 0 outline reads") == std::string::npos,
+      // Named by the bound that was hit: the outline reads', not the candidate budget.
+      fail_unless(text.find("needed more outline reads than the per-frame bound of 32") != std::string::npos &&
+                      text.find("outline reads were skipped") != std::string::npos &&
+                      text.find("candidate markers") == std::string::npos &&
+                      text.find("max-candidates") == std::string::npos && text.find(" 0 ") == std::string::npos,
                   "%s", error->message);
       g_error_free(error);
       gst_message_unref(m);
