@@ -131,6 +131,7 @@ def check_jsonl(lines):
         assert abs(line["pts"] - n * Gst.SECOND / 30) <= Gst.MSECOND, (n, line["pts"])
         assert abs(line["time"] - line["pts"] / Gst.SECOND) < 1e-9
         assert (line["width"], line["height"]) == (640, 480)
+        assert line["analysed"] is True, (n, line["analysed"])  # annotate analyses every frame
         assert list(line)[:3] == ["frame", "pts", "time"], list(line)
 
         def matches(d, m):
