@@ -44,7 +44,9 @@
  * - "appeared", "vanished" (#GstValueArray of strings): ids not in the frame
  *   before, and ids of the frame before that are gone (sorted)
  * - "width", "height" (#gint): the analysed frame
- * - "detections" (#GstValueArray of #GstStructure): as in the LFTagMeta
+ * - "detections" (#GstValueArray of #GstStructure): as in the LFTagMeta; only
+ *   with #GstLFTagDetect:message-detections (about 2.3 KB a marker: a message
+ *   with four markers is 0.4 KB without them, 9.7 KB with them)
  *
  * Each "lftag/detection" structure holds: "family" (string, "3x3"), "id"
  * (guint64, only when the id fits), "id-string" (decimal, always, exact),
@@ -128,6 +130,7 @@ enum {
   PROP_OVERLAY,
   PROP_MESSAGE,
   PROP_MESSAGES,
+  PROP_MESSAGE_DETECTIONS,
   PROP_THRESHOLD_WINDOW,
   PROP_THRESHOLD_OFFSET,
   PROP_SECOND_LOOK,
@@ -148,6 +151,7 @@ enum {
 #define DEFAULT_PROP_DISTORTION nullptr
 #define DEFAULT_PROP_OVERLAY 0
 #define DEFAULT_PROP_MESSAGES GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS
+#define DEFAULT_PROP_MESSAGE_DETECTIONS FALSE
 #define DEFAULT_PROP_LATE_FRAMES GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE
 /* The detector's own parameters default to the library's (DetectorParams). */
 
@@ -222,6 +226,7 @@ struct Settings {
   std::string families_error, distortion_error, cx_error, cy_error;
   guint overlay = DEFAULT_PROP_OVERLAY;
   GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
+  bool message_detections = DEFAULT_PROP_MESSAGE_DETECTIONS;
   GstLFTagDetectLateFrames late_frames = DEFAULT_PROP_LATE_FRAMES;
 
   Settings() {
@@ -437,10 +442,17 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
   g_object_class_install_property(
       gobject_class, PROP_MESSAGES,
       g_param_spec_enum("messages", "Messages",
-                        "Which frames post an element message \"lftag\" (ids and centres, then "
-                        "the full detections): with-markers, on-change (the set of ids changed), "
-                        "every-frame or none",
+                        "Which frames post an element message \"lftag\" (timestamps, ids and centres; "
+                        "the full detections with message-detections): with-markers, on-change (the "
+                        "set of ids changed), every-frame or none",
                         GST_TYPE_LFTAG_DETECT_MESSAGES, DEFAULT_PROP_MESSAGES, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_MESSAGE_DETECTIONS,
+      g_param_spec_boolean("message-detections", "Message detections",
+                           "Also put the full detections (the LFTagMeta's: keypoints, centroids, corners, "
+                           "poses, about 2.3 KB a marker) at the end of each \"lftag\" message; by default "
+                           "a message holds the timestamps, ids, centres, appeared, vanished and frame size only",
+                           DEFAULT_PROP_MESSAGE_DETECTIONS, playing));
   g_object_class_install_property(
       gobject_class, PROP_MESSAGE,
       g_param_spec_boolean("message", "Message",
@@ -652,6 +664,7 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
         s.messages = GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS;
       break;
     case PROP_MESSAGES: s.messages = GstLFTagDetectMessages(g_value_get_enum(value)); break;
+    case PROP_MESSAGE_DETECTIONS: s.message_detections = g_value_get_boolean(value); break;
     case PROP_LATE_FRAMES: s.late_frames = GstLFTagDetectLateFrames(g_value_get_enum(value)); break;
     case PROP_THRESHOLD_WINDOW: s.detector.threshold_window = g_value_get_int(value); break;
     case PROP_THRESHOLD_OFFSET: s.detector.threshold_offset = g_value_get_int(value); break;
@@ -685,6 +698,7 @@ static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue
     case PROP_OVERLAY: g_value_set_flags(value, s.overlay); break;
     case PROP_MESSAGE: g_value_set_boolean(value, s.messages != GST_LFTAG_DETECT_MESSAGES_NONE); break;
     case PROP_MESSAGES: g_value_set_enum(value, s.messages); break;
+    case PROP_MESSAGE_DETECTIONS: g_value_set_boolean(value, s.message_detections); break;
     case PROP_LATE_FRAMES: g_value_set_enum(value, s.late_frames); break;
     case PROP_THRESHOLD_WINDOW: g_value_set_int(value, s.detector.threshold_window); break;
     case PROP_THRESHOLD_OFFSET: g_value_set_int(value, s.detector.threshold_offset); break;
@@ -1095,8 +1109,9 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
 
   if (s.overlay && !detections.empty()) gst_lftag_detect_draw(self, buffer, info, s, camera, detections);
 
-  if (GstMessage* message = st.messages.frame(GST_OBJECT(self), s.messages, GST_BASE_TRANSFORM(self)->segment, buffer,
-                                              GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections))
+  if (GstMessage* message =
+          st.messages.frame(GST_OBJECT(self), s.messages, s.message_detections, GST_BASE_TRANSFORM(self)->segment,
+                            buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections))
     gst_element_post_message(GST_ELEMENT(self), message);
   return GST_FLOW_OK;
 }

@@ -657,7 +657,9 @@ GST_END_TEST;
 
 GST_START_TEST(test_messages) {
   GstElement* pipeline =
-      gst_parse_launch("lftagtestsrc num-buffers=10 ids=6789,42 ! lftagdetect name=d ! fakesink name=sink", nullptr);
+      gst_parse_launch("lftagtestsrc num-buffers=10 ids=6789,42 ! lftagdetect name=d message-detections=true ! "
+                       "fakesink name=sink",
+                       nullptr);
   // The meta of every frame, by timestamp, to compare with the messages.
   struct Seen {
     GMutex lock;
@@ -790,7 +792,7 @@ static std::vector<Posted> messages_for(const std::string& properties) {
   GstBuffer* script[] = {none.buffers[0], both.buffers[0], both.buffers[0], one.buffers[0],
                          one.buffers[0],  none.buffers[0], none.buffers[0], one.buffers[0]};
 
-  GstHarness* h = detector("families=3x3 " + properties, both.info);
+  GstHarness* h = detector("families=3x3 message-detections=true " + properties, both.info);
   GstBus* bus = gst_bus_new();
   gst_element_set_bus(h->element, bus);
   for (std::size_t i = 0; i < G_N_ELEMENTS(script); ++i) {
@@ -848,6 +850,51 @@ GST_START_TEST(test_message_modes) {
   fail_unless(posted[2].ids.empty() && posted[2].vanished == one && posted[2].detections == 0);
   fail_unless(posted[3].ids == one && posted[3].appeared == one);
   for (const Posted& p : posted) fail_unless(p.centers == p.ids.size() && p.detections == p.ids.size());
+}
+GST_END_TEST;
+
+// By default a message is compact: the timestamps, ids, centres, appeared, vanished and
+// the frame size, without the full detections (9.7 KB a message with four markers, most
+// of what gst-launch-1.0 -m printed); message-detections=true puts them back at the end.
+GST_START_TEST(test_message_compact_by_default) {
+  GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
+  gboolean full = TRUE;
+  g_object_get(e, "message-detections", &full, nullptr);
+  fail_if(full, "message-detections is on by default");
+  gst_object_unref(e);
+
+  const auto first = [](const std::string& properties) {
+    std::vector<GstMessage*> messages = run_to_eos(
+        "lftagtestsrc count=4 num-buffers=1 ! lftagdetect deadline=0 " + properties + " ! fakesink", GST_MESSAGE_ELEMENT);
+    fail_unless_equals_int(messages.size(), 1);
+    GstStructure* s = gst_structure_copy(gst_message_get_structure(messages[0]));
+    count_and_free(messages);
+    return s;
+  };
+  GstStructure* compact = first("");
+  GstStructure* full_one = first("message-detections=true");
+  fail_if(gst_structure_has_field(compact, "detections"));
+  fail_unless_equals_int(strings_of(compact, "ids").size(), 4);
+  fail_unless_equals_int(gst_value_array_get_size(gst_structure_get_value(compact, "centers")), 4);
+  fail_unless(gst_structure_nth_field_name(compact, gst_structure_n_fields(compact) - 1) == std::string("height"));
+  // The compact fields are the full message's, which ends with the four detections.
+  fail_unless_equals_int(gst_structure_n_fields(full_one), gst_structure_n_fields(compact) + 1);
+  for (int i = 0; i < gst_structure_n_fields(compact); ++i) {
+    const char* name = gst_structure_nth_field_name(compact, i);
+    fail_unless(gst_value_compare(gst_structure_get_value(compact, name), gst_structure_get_value(full_one, name)) ==
+                    GST_VALUE_EQUAL,
+                "%s differs", name);
+  }
+  fail_unless_equals_int(gst_value_array_get_size(gst_structure_get_value(full_one, "detections")), 4);
+  // What gst-launch-1.0 -m prints: under a kilobyte, where the full one is over 8.
+  gchar* compact_text = gst_structure_to_string(compact);
+  gchar* full_text = gst_structure_to_string(full_one);
+  fail_unless(strlen(compact_text) < 1000, "%zu bytes: %s", strlen(compact_text), compact_text);
+  fail_unless(strlen(full_text) > 8000, "%zu bytes", strlen(full_text));
+  g_free(compact_text);
+  g_free(full_text);
+  gst_structure_free(compact);
+  gst_structure_free(full_one);
 }
 GST_END_TEST;
 
@@ -1700,6 +1747,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_region_clipped);
   tcase_add_test(tc, test_messages);
   tcase_add_test(tc, test_message_modes);
+  tcase_add_test(tc, test_message_compact_by_default);
   tcase_add_test(tc, test_message_property_compatible);
   tcase_add_test(tc, test_message_switch_and_empty_frames);
   tcase_add_test(tc, test_message_times_after_seek);
