@@ -18,10 +18,10 @@
  *   whose structure holds the analysed frame's "width" and "height",
  *   "analysed" (FALSE when the frame was passed on without detection: late, see
  *   #GstLFTagDetect:late-frames, or unreadable) and "detections", an array of
- *   "lftag/detection" structures (empty when nothing was found). It has no
- *   tags, so videoconvert, videoscale, queue, tee and encoders keep it; its
- *   coordinates stay those of the analysed frame. It replaces an LFTagMeta the
- *   buffer already carried.
+ *   "lftag/detection" structures (empty when nothing was found). Queue, tee,
+ *   videoconvert, encoders and decoders keep it as it is; videoscale moves its
+ *   points and size to the scaled frame (poses do not change); videocrop and
+ *   videobox drop it. It replaces an LFTagMeta the buffer already carried.
  * - one GstVideoRegionOfInterestMeta per detection: roi_type "lftag", ids
  *   numbered on from the buffer's other regions, the bounding box of the outer
  *   corners clipped to the frame, and a param structure "lftag" with the fields

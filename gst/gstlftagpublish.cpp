@@ -15,12 +15,13 @@
  * since the element started, from 0, counting buffers without a meta too),
  * "pts", "time" (the pts in seconds), "dts", "duration", "running_time",
  * "stream_time" (nanoseconds; null when unknown), "width" and "height" (the
- * analysed frame), "analysed" (false for a frame lftagdetect passed on without
- * detection: late under late-frames=skip, or unreadable; its empty detections say
- * nothing about markers) and "detections", each as `lftag detect` prints it (family,
- * id, id_hex, keypoints, center, corners, centroids, pose, decode_error,
- * worst_cell, edge_score, reprojection_error). A buffer without an LFTagMeta
- * writes no line (the element warns once per stream).
+ * frame the points are in: the analysed one, or the scaled one after
+ * videoscale), "analysed" (false for a frame lftagdetect passed on without
+ * detection: late under late-frames=skip, or unreadable; its empty detections
+ * say nothing about markers) and "detections", each as `lftag detect` prints it
+ * (family, id, id_hex, keypoints, center, corners, centroids, pose,
+ * decode_error, worst_cell, edge_score, reprojection_error). A buffer without an
+ * LFTagMeta writes no line (the element warns once per stream).
  *
  * To join a line with its frame in a file, use "stream_time": the frame's position
  * in the stream, from 0 at the start of the file, whatever offset the pts carries
@@ -420,7 +421,7 @@ static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, Gst
       GST_ELEMENT_WARNING(self, STREAM, FORMAT,
                           ("A buffer without LFTagMeta came: lftagpublish writes the detections of "
                            "lftagdetect, which must be upstream (muxers and files do not keep the "
-                           "meta)."),
+                           "meta, nor do videocrop and videobox, which cannot move its points)."),
                           ("first at %" GST_TIME_FORMAT, GST_TIME_ARGS(GST_BUFFER_PTS(buffer))));
       self->warned_no_meta = TRUE;
     }

@@ -538,18 +538,34 @@ GST_START_TEST(test_overlay_composition_meta) {
 GST_END_TEST;
 
 // videoconvert and videoscale keep the LFTagMeta as it was and scale the boxes.
+// Through videoconvert and videoscale (here 640x480 to 320x180, not keeping the aspect)
+// the LFTagMeta's points and frame size follow the frame: each point maps edge to edge,
+// (x + 0.5) * 320 / 640 - 0.5; poses and everything else stay as they were.
 GST_START_TEST(test_metas_after_convert_and_scale) {
   const std::string source =
       "lftagtestsrc num-buffers=2 count=3 seed=21 ! video/x-raw,width=640,height=480 ! lftagdetect";
   Frames direct, scaled;
   pull_frames(direct, source, nullptr, 2);
-  pull_frames(scaled, source + " ! videoconvert ! videoscale", "video/x-raw,format=I420,width=320,height=240", 2);
+  pull_frames(scaled, source + " ! videoconvert ! videoscale", "video/x-raw,format=I420,width=320,height=180", 2);
+  const double sx = 320.0 / 640, sy = 180.0 / 480;
+  const auto near = [&](cv::Point2d small, cv::Point2d big) {
+    return std::abs(small.x - ((big.x + 0.5) * sx - 0.5)) < 1e-9 &&
+           std::abs(small.y - ((big.y + 0.5) * sy - 0.5)) < 1e-9;
+  };
   for (int i = 0; i < 2; ++i) {
-    fail_unless(gst_structure_is_equal(lftag_meta_get_structure(scaled.buffers[i], LFTAG_META_NAME),
-                                       lftag_meta_get_structure(direct.buffers[i], LFTAG_META_NAME)));
-    const FrameDetections frame = detections_of(scaled.buffers[i]);
-    fail_unless(frame.width == 640 && frame.height == 480, "coordinates stay those of the analysed frame");
+    const FrameDetections frame = detections_of(scaled.buffers[i]), original = detections_of(direct.buffers[i]);
+    fail_unless(frame.width == 320 && frame.height == 180, "%dx%d", frame.width, frame.height);
+    fail_unless(frame.analysed == original.analysed);
     fail_unless_equals_int(frame.detections.size(), 3);
+    for (std::size_t k = 0; k < 3; ++k) {
+      const Detection &d = frame.detections[k], &o = original.detections[k];
+      fail_unless(d.id == o.id && d.rvec == o.rvec && d.tvec == o.tvec && d.decode_error == o.decode_error);
+      fail_unless(near(d.center, o.center));
+      for (std::size_t j = 0; j < 4; ++j)
+        fail_unless(near(d.corners[j], o.corners[j]) && near(d.keypoints[j], o.keypoints[j]));
+      fail_unless_equals_int(d.centroids.size(), o.centroids.size());
+      for (std::size_t j = 0; j < d.centroids.size(); ++j) fail_unless(near(d.centroids[j], o.centroids[j]));
+    }
     for (gint id = 0; id < 3; ++id) {
       const GstVideoRegionOfInterestMeta* big = gst_buffer_get_video_region_of_interest_meta_id(direct.buffers[i], id);
       const GstVideoRegionOfInterestMeta* small =
@@ -557,7 +573,38 @@ GST_START_TEST(test_metas_after_convert_and_scale) {
       fail_unless(big && small, "region %d lost", id);
       fail_unless(small->roi_type == g_quark_from_string("lftag"));
       fail_unless(std::abs(int(small->x) - int(big->x) / 2) <= 1 && std::abs(int(small->w) - int(big->w) / 2) <= 1);
-      fail_unless(std::abs(int(small->y) - int(big->y) / 2) <= 1 && std::abs(int(small->h) - int(big->h) / 2) <= 1);
+      fail_unless(std::abs(small->y - big->y * sy) <= 1 && std::abs(small->h - big->h * sy) <= 1);
+    }
+  }
+}
+GST_END_TEST;
+
+// After videoscale the meta's corners and centres are where the detector finds them in
+// the scaled frame, within 0.5 px, up and down.
+GST_START_TEST(test_meta_follows_videoscale) {
+  const std::string source = "lftagtestsrc num-buffers=2 count=3 seed=21 ! video/x-raw,width=640,height=480";
+  for (const char* size : {"width=960,height=720", "width=320,height=240"}) {
+    const std::string caps = std::string("video/x-raw,") + size;
+    Frames moved, found;
+    pull_frames(moved, source + " ! lftagdetect deadline=0 ! videoscale", caps.c_str(), 2);
+    pull_frames(found, source + " ! videoscale ! " + caps + " ! lftagdetect deadline=0", nullptr, 2);
+    for (int i = 0; i < 2; ++i) {
+      const FrameDetections a = detections_of(moved.buffers[i]), b = detections_of(found.buffers[i]);
+      fail_unless(a.width == b.width && a.height == b.height, "%s: %dx%d", size, a.width, a.height);
+      fail_unless_equals_int(a.detections.size(), 3);
+      fail_unless_equals_int(b.detections.size(), 3);
+      for (const Detection& d : a.detections) {
+        const auto e =
+            std::find_if(b.detections.begin(), b.detections.end(), [&](const Detection& x) { return x.id == d.id; });
+        fail_unless(e != b.detections.end(), "%s: %s not found in the scaled frame", size, d.id.to_decimal().c_str());
+        const auto off = [](cv::Point2d p, cv::Point2d q) {
+          return std::max(std::abs(p.x - q.x), std::abs(p.y - q.y));
+        };
+        fail_unless(off(d.center, e->center) <= 0.5, "%s: centre %g px off", size, off(d.center, e->center));
+        for (std::size_t j = 0; j < 4; ++j)
+          fail_unless(off(d.corners[j], e->corners[j]) <= 0.5, "%s: corner %zu %g px off", size, j,
+                      off(d.corners[j], e->corners[j]));
+      }
     }
   }
 }
@@ -1743,6 +1790,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_overlay);
   tcase_add_test(tc, test_overlay_composition_meta);
   tcase_add_test(tc, test_metas_after_convert_and_scale);
+  tcase_add_test(tc, test_meta_follows_videoscale);
   tcase_add_test(tc, test_region_metas);
   tcase_add_test(tc, test_region_clipped);
   tcase_add_test(tc, test_messages);

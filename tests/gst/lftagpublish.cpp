@@ -348,6 +348,36 @@ GST_START_TEST(test_after_encode_and_decode) {
 }
 GST_END_TEST;
 
+// videocrop and videobox cannot move the meta's points: they drop it rather than pass it
+// on wrong, and lftagpublish after them writes nothing and says why. videoscale moves
+// them: its lines are in the scaled frame.
+GST_START_TEST(test_after_crop_and_scale) {
+  const ScratchDir scratch;
+  const std::string path = scratch.path("crop.jsonl");
+  for (const char* element : {"videocrop left=10 top=6", "videobox left=8"}) {
+    Run run;
+    run_pipeline(std::string("lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect ! ") + element +
+                     " ! lftagpublish location=" + path + " ! fakesink name=sink",
+                 run);
+    fail_unless_equals_int(run.buffers.size(), 3);
+    for (const Seen& seen : run.buffers) fail_unless(seen.meta == nullptr, "%s kept the meta", element);
+    fail_unless_equals_int(read_lines(path).size(), 0);
+    fail_unless_equals_int(run.warnings.size(), 1);
+    GError* error = nullptr;
+    gst_message_parse_warning(run.warnings[0], &error, nullptr);
+    fail_unless(has(error->message, "videocrop"), "%s", error->message);
+    g_error_free(error);
+  }
+  Run run;
+  run_pipeline("lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect ! videoscale ! video/x-raw,width=320,height=240 ! "
+               "lftagpublish location=" + path + " ! fakesink name=sink",
+               run);
+  const std::vector<nlohmann::json> lines = read_lines(path);
+  expect_lines_match(lines, run);
+  for (const nlohmann::json& line : lines) fail_unless(line["width"] == 320 && line["height"] == 240);
+}
+GST_END_TEST;
+
 // After a seek the running time starts again at 0 while pts and stream time go on.
 GST_START_TEST(test_times_after_seek) {
   const ScratchDir scratch;
@@ -599,6 +629,7 @@ static Suite* lftagpublish_suite(void) {
   tcase_add_test(tc, test_stdout);
   tcase_add_test(tc, test_unwritable_location);
   tcase_add_test(tc, test_after_encode_and_decode);
+  tcase_add_test(tc, test_after_crop_and_scale);
   tcase_add_test(tc, test_times_after_seek);
   tcase_add_test(tc, test_times_in_a_segment_not_from_zero);
   tcase_add_test(tc, test_late_frame_not_analysed);
