@@ -584,11 +584,31 @@ int Annotator::run() {
     video_.path = o_.output;
   }
   if (!o_.jsonl.empty() && o_.jsonl != "-") jsonl_.path = o_.jsonl;
+  // SIGTERM (what timeout, systemd and docker send) stops the run as Ctrl-C does: the
+  // .part files removed, nothing left that looks complete. Caught from before the first
+  // .part file is made; handled once the main loop runs.
+  struct Interrupt {
+    Annotator* self;
+    int signal;
+    int* caught;
+  };
+  int caught = 0;
+  Interrupt on_int{this, SIGINT, &caught}, on_term{this, SIGTERM, &caught};
+  const auto stop = [](gpointer data) -> gboolean {
+    const auto* interrupt = static_cast<Interrupt*>(data);
+    if (*interrupt->caught == 0) *interrupt->caught = interrupt->signal;
+    g_main_loop_quit(interrupt->self->loop_);
+    return G_SOURCE_CONTINUE;
+  };
+  const guint sigint = g_unix_signal_add(SIGINT, stop, &on_int);
+  const guint sigterm = g_unix_signal_add(SIGTERM, stop, &on_term);
   try {
     video_.check_writable();
     jsonl_.check_writable();
     build();
   } catch (...) {
+    g_source_remove(sigint);
+    g_source_remove(sigterm);
     video_.discard();
     jsonl_.discard();
     throw;
@@ -608,23 +628,6 @@ int Annotator::run() {
         return G_SOURCE_CONTINUE;
       },
       this);
-  // SIGTERM (what timeout, systemd and docker send) stops the run as Ctrl-C does: the
-  // .part files removed, nothing left that looks complete.
-  struct Interrupt {
-    Annotator* self;
-    int signal;
-    int* caught;
-  };
-  int caught = 0;
-  Interrupt on_int{this, SIGINT, &caught}, on_term{this, SIGTERM, &caught};
-  const auto stop = [](gpointer data) -> gboolean {
-    const auto* interrupt = static_cast<Interrupt*>(data);
-    if (*interrupt->caught == 0) *interrupt->caught = interrupt->signal;
-    g_main_loop_quit(interrupt->self->loop_);
-    return G_SOURCE_CONTINUE;
-  };
-  const guint sigint = g_unix_signal_add(SIGINT, stop, &on_int);
-  const guint sigterm = g_unix_signal_add(SIGTERM, stop, &on_term);
 
   if (gst_element_set_state(pipeline_, GST_STATE_PLAYING) == GST_STATE_CHANGE_FAILURE) {
     // The bus says why (a file that cannot be opened, a calibration that does not load).
