@@ -10,7 +10,9 @@
     read-meta.py                       synthetic markers from lftagtestsrc
     read-meta.py 'filesrc location=in.webm ! decodebin ! videoconvert'
 
-The argument is the pipeline's start; "! lftagdetect name=detect ! fakesink" is appended.
+The argument is the pipeline's start; "! lftagdetect name=detect message-detections=true
+! fakesink" is appended (message-detections: the messages carry the full detections, as
+the meta does; without it they hold the ids and centres only).
 Needs python3-gi and python3-gst-1.0 (for GstValueArray as Python lists): run it with
 Debian's /usr/bin/python3.
 """
@@ -68,7 +70,7 @@ def main():
     Gst.init(None)
     source = sys.argv[1] if len(sys.argv) > 1 else "lftagtestsrc num-buffers=30 count=3"
     try:
-        pipeline = Gst.parse_launch(f"{source} ! lftagdetect name=detect ! fakesink")
+        pipeline = Gst.parse_launch(f"{source} ! lftagdetect name=detect message-detections=true ! fakesink")
     except GLib.Error as error:
         sys.exit(f"cannot build the pipeline: {error.message}")
     pipeline.get_by_name("detect").get_static_pad("src").add_probe(Gst.PadProbeType.BUFFER, on_buffer)

@@ -70,7 +70,7 @@ std::vector<std::string> difference(const std::vector<std::string>& a, const std
 
 std::string marker_key(const Family& family, const TagId& id) { return family.name() + ":" + id.to_decimal(); }
 
-GstMessage* DetectMessages::frame(GstObject* source, GstLFTagDetectMessages mode, const GstSegment& segment,
+GstMessage* DetectMessages::frame(GstObject* source, GstLFTagDetectMessages mode, bool full, const GstSegment& segment,
                                   GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections) {
   std::vector<std::string> ids; /* in the detections' order */
   for (const Detection& d : detections) ids.push_back(marker_key(d.family, d.id));
@@ -90,7 +90,8 @@ GstMessage* DetectMessages::frame(GstObject* source, GstLFTagDetectMessages mode
   }
   if (!post) return nullptr;
 
-  /* What a reader of gst-launch-1.0 -m wants first, the full record last. */
+  /* What a reader of gst-launch-1.0 -m wants first, the full record last and only
+   * when asked for: about 2.3 KB a marker, where the rest is 0.4 KB with four markers. */
   const GstClockTime pts = GST_BUFFER_PTS(buffer);
   GstStructure* s = gst_structure_new("lftag", "timestamp", G_TYPE_UINT64, pts, "stream-time", G_TYPE_UINT64,
                                       gst_segment_to_stream_time(&segment, GST_FORMAT_TIME, pts), "running-time",
@@ -101,7 +102,7 @@ GstMessage* DetectMessages::frame(GstObject* source, GstLFTagDetectMessages mode
   set_strings(s, "appeared", appeared);
   set_strings(s, "vanished", vanished);
   gst_structure_set(s, "width", G_TYPE_INT, width, "height", G_TYPE_INT, height, nullptr);
-  set_detections(s, LFTAG_META_FIELD_DETECTIONS, detections);
+  if (full) set_detections(s, LFTAG_META_FIELD_DETECTIONS, detections);
   return gst_message_new_element(source, s);
 }
 

@@ -41,12 +41,13 @@ namespace lftag::gst {
  * builds it. Used by the streaming thread only. */
 class DetectMessages {
  public:
-  /* The "lftag" message of this frame under `mode`, or null when it posts none.
-   * Every analysed frame must come through here, whatever the mode, so that
+  /* The "lftag" message of this frame under `mode`, or null when it posts none;
+   * with `full`, the whole detections at its end (message-detections). Every
+   * analysed frame must come through here, whatever the mode, so that
    * "on-change" and the "appeared" and "vanished" fields compare with the frame
    * just before. */
-  GstMessage* frame(GstObject* source, GstLFTagDetectMessages mode, const GstSegment& segment, GstBuffer* buffer,
-                    int width, int height, const std::vector<Detection>& detections);
+  GstMessage* frame(GstObject* source, GstLFTagDetectMessages mode, bool full, const GstSegment& segment,
+                    GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections);
   /* A new stream: nothing was seen before. */
   void reset() { previous_.clear(); }
 

@@ -18,10 +18,10 @@
  *   whose structure holds the analysed frame's "width" and "height",
  *   "analysed" (FALSE when the frame was passed on without detection: late, see
  *   #GstLFTagDetect:late-frames, or unreadable) and "detections", an array of
- *   "lftag/detection" structures (empty when nothing was found). It has no
- *   tags, so videoconvert, videoscale, queue, tee and encoders keep it; its
- *   coordinates stay those of the analysed frame. It replaces an LFTagMeta the
- *   buffer already carried.
+ *   "lftag/detection" structures (empty when nothing was found). Queue, tee,
+ *   videoconvert, encoders and decoders keep it as it is; videoscale moves its
+ *   points and size to the scaled frame (poses do not change); videocrop and
+ *   videobox drop it. It replaces an LFTagMeta the buffer already carried.
  * - one GstVideoRegionOfInterestMeta per detection: roi_type "lftag", ids
  *   numbered on from the buffer's other regions, the bounding box of the outer
  *   corners clipped to the frame, and a param structure "lftag" with the fields
@@ -44,7 +44,9 @@
  * - "appeared", "vanished" (#GstValueArray of strings): ids not in the frame
  *   before, and ids of the frame before that are gone (sorted)
  * - "width", "height" (#gint): the analysed frame
- * - "detections" (#GstValueArray of #GstStructure): as in the LFTagMeta
+ * - "detections" (#GstValueArray of #GstStructure): as in the LFTagMeta; only
+ *   with #GstLFTagDetect:message-detections (about 2.3 KB a marker: a message
+ *   with four markers is 0.4 KB without them, 9.7 KB with them)
  *
  * Each "lftag/detection" structure holds: "family" (string, "3x3"), "id"
  * (guint64, only when the id fits), "id-string" (decimal, always, exact),
@@ -128,6 +130,7 @@ enum {
   PROP_OVERLAY,
   PROP_MESSAGE,
   PROP_MESSAGES,
+  PROP_MESSAGE_DETECTIONS,
   PROP_THRESHOLD_WINDOW,
   PROP_THRESHOLD_OFFSET,
   PROP_SECOND_LOOK,
@@ -148,6 +151,7 @@ enum {
 #define DEFAULT_PROP_DISTORTION nullptr
 #define DEFAULT_PROP_OVERLAY 0
 #define DEFAULT_PROP_MESSAGES GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS
+#define DEFAULT_PROP_MESSAGE_DETECTIONS FALSE
 #define DEFAULT_PROP_LATE_FRAMES GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE
 /* The detector's own parameters default to the library's (DetectorParams). */
 
@@ -222,6 +226,7 @@ struct Settings {
   std::string families_error, distortion_error, cx_error, cy_error;
   guint overlay = DEFAULT_PROP_OVERLAY;
   GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
+  bool message_detections = DEFAULT_PROP_MESSAGE_DETECTIONS;
   GstLFTagDetectLateFrames late_frames = DEFAULT_PROP_LATE_FRAMES;
 
   Settings() {
@@ -437,10 +442,17 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
   g_object_class_install_property(
       gobject_class, PROP_MESSAGES,
       g_param_spec_enum("messages", "Messages",
-                        "Which frames post an element message \"lftag\" (ids and centres, then "
-                        "the full detections): with-markers, on-change (the set of ids changed), "
-                        "every-frame or none",
+                        "Which frames post an element message \"lftag\" (timestamps, ids and centres; "
+                        "the full detections with message-detections): with-markers, on-change (the "
+                        "set of ids changed), every-frame or none",
                         GST_TYPE_LFTAG_DETECT_MESSAGES, DEFAULT_PROP_MESSAGES, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_MESSAGE_DETECTIONS,
+      g_param_spec_boolean("message-detections", "Message detections",
+                           "Also put the full detections (the LFTagMeta's: keypoints, centroids, corners, "
+                           "poses, about 2.3 KB a marker) at the end of each \"lftag\" message; by default "
+                           "a message holds the timestamps, ids, centres, appeared, vanished and frame size only",
+                           DEFAULT_PROP_MESSAGE_DETECTIONS, playing));
   g_object_class_install_property(
       gobject_class, PROP_MESSAGE,
       g_param_spec_boolean("message", "Message",
@@ -652,6 +664,7 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
         s.messages = GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS;
       break;
     case PROP_MESSAGES: s.messages = GstLFTagDetectMessages(g_value_get_enum(value)); break;
+    case PROP_MESSAGE_DETECTIONS: s.message_detections = g_value_get_boolean(value); break;
     case PROP_LATE_FRAMES: s.late_frames = GstLFTagDetectLateFrames(g_value_get_enum(value)); break;
     case PROP_THRESHOLD_WINDOW: s.detector.threshold_window = g_value_get_int(value); break;
     case PROP_THRESHOLD_OFFSET: s.detector.threshold_offset = g_value_get_int(value); break;
@@ -685,6 +698,7 @@ static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue
     case PROP_OVERLAY: g_value_set_flags(value, s.overlay); break;
     case PROP_MESSAGE: g_value_set_boolean(value, s.messages != GST_LFTAG_DETECT_MESSAGES_NONE); break;
     case PROP_MESSAGES: g_value_set_enum(value, s.messages); break;
+    case PROP_MESSAGE_DETECTIONS: g_value_set_boolean(value, s.message_detections); break;
     case PROP_LATE_FRAMES: g_value_set_enum(value, s.late_frames); break;
     case PROP_THRESHOLD_WINDOW: g_value_set_int(value, s.detector.threshold_window); break;
     case PROP_THRESHOLD_OFFSET: g_value_set_int(value, s.detector.threshold_offset); break;
@@ -934,6 +948,37 @@ static gboolean gst_lftag_detect_src_event(GstBaseTransform* trans, GstEvent* ev
   return GST_BASE_TRANSFORM_CLASS(parent_class)->src_event(trans, event);
 }
 
+/* What the per-frame bounds cut in a frame, named by the bound that was hit (the
+ * candidate budget, max-candidates; the second looks' bound; the 32 outline reads),
+ * with only the counts that are not 0: "held more candidate markers than the
+ * per-frame budget allows (max-candidates=1): 2 candidates were skipped, ...". */
+static std::string gst_lftag_detect_budget_text(const lftag::DetectionStats& stats,
+                                                const lftag::DetectorParams& params) {
+  std::vector<std::string> bounds, counts;
+  /* A spent candidate budget also stops the second looks. */
+  if (stats.skipped_by_budget > 0)
+    bounds.push_back("held more candidate markers than the per-frame budget allows (max-candidates=" +
+                     std::to_string(params.max_candidates) + ")");
+  else if (stats.second_looks_skipped > 0)
+    bounds.push_back("needed more second looks than the per-frame bound of " + std::to_string(params.max_second_looks));
+  if (stats.outline_reads_skipped > 0) bounds.push_back("needed more outline reads than the per-frame bound of 32");
+  const auto count = [&](std::int64_t n, const char* one, const char* many) {
+    if (n > 0) counts.push_back(std::to_string(n) + " " + (n == 1 ? one : many));
+  };
+  count(stats.skipped_by_budget, "candidate", "candidates");
+  count(stats.second_looks_skipped, "second look", "second looks");
+  count(stats.outline_reads_skipped, "outline read", "outline reads");
+  const auto join = [](const std::vector<std::string>& items, const char* last) {
+    std::string out;
+    for (std::size_t i = 0; i < items.size(); ++i)
+      out += (i == 0 ? "" : i + 1 == items.size() ? last : ", ") + items[i];
+    return out;
+  };
+  const bool one = counts.size() == 1 && counts[0].compare(0, 2, "1 ") == 0;
+  return join(bounds, " and ") + ": " + join(counts, " and ") + (one ? " was" : " were") +
+         " skipped, the most plausible examined first";
+}
+
 /* Whether downstream's last QoS report makes this buffer late. */
 static bool gst_lftag_detect_is_late(GstLFTagDetect* self, GstBuffer* buffer, gdouble* proportion,
                                      GstClockTimeDiff* jitter) {
@@ -1038,15 +1083,14 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
                  GST_TIME_ARGS(GST_BUFFER_PTS(buffer)));
   if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0 || stats.outline_reads_skipped > 0) &&
       !st.warned_budget) {
+    const std::string text = gst_lftag_detect_budget_text(stats, st.detector->params());
     GST_ELEMENT_WARNING(self, STREAM, FAILED,
-                        ("The frame at %" GST_TIME_FORMAT " held more candidate markers than the "
-                         "per-frame budget allows (max-candidates=%d, 32 outline reads): %" G_GINT64_FORMAT
-                         " candidates, %" G_GINT64_FORMAT " second looks and %" G_GINT64_FORMAT
-                         " outline reads were skipped, the most plausible candidates examined first. "
-                         "Markers may be missed in such frames; this is reported once per stream.",
-                         GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), s.detector.max_candidates, stats.skipped_by_budget,
-                         stats.second_looks_skipped, stats.outline_reads_skipped),
-                        (nullptr));
+                        ("The frame at %" GST_TIME_FORMAT " %s. Markers may be missed in such frames; this is "
+                         "reported once per stream.",
+                         GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), text.c_str()),
+                        ("%" G_GINT64_FORMAT " candidates, %" G_GINT64_FORMAT " second looks and %" G_GINT64_FORMAT
+                         " outline reads skipped",
+                         stats.skipped_by_budget, stats.second_looks_skipped, stats.outline_reads_skipped));
     st.warned_budget = true;
   }
   if (stats.past_deadline > 0 && !st.warned_deadline) {
@@ -1065,8 +1109,9 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
 
   if (s.overlay && !detections.empty()) gst_lftag_detect_draw(self, buffer, info, s, camera, detections);
 
-  if (GstMessage* message = st.messages.frame(GST_OBJECT(self), s.messages, GST_BASE_TRANSFORM(self)->segment, buffer,
-                                              GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections))
+  if (GstMessage* message =
+          st.messages.frame(GST_OBJECT(self), s.messages, s.message_detections, GST_BASE_TRANSFORM(self)->segment,
+                            buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections))
     gst_element_post_message(GST_ELEMENT(self), message);
   return GST_FLOW_OK;
 }

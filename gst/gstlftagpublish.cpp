@@ -15,10 +15,20 @@
  * since the element started, from 0, counting buffers without a meta too),
  * "pts", "time" (the pts in seconds), "dts", "duration", "running_time",
  * "stream_time" (nanoseconds; null when unknown), "width" and "height" (the
- * analysed frame) and "detections", each as `lftag detect` prints it (family,
- * id, id_hex, keypoints, center, corners, centroids, pose, decode_error,
- * worst_cell, edge_score, reprojection_error). A buffer without an LFTagMeta
- * writes no line (the element warns once per stream).
+ * frame the points are in: the analysed one, or the scaled one after
+ * videoscale), "analysed" (false for a frame lftagdetect passed on without
+ * detection: late under late-frames=skip, or unreadable; its empty detections
+ * say nothing about markers) and "detections", each as `lftag detect` prints it
+ * (family, id, id_hex, keypoints, center, corners, centroids, pose,
+ * decode_error, worst_cell, edge_score, reprojection_error). A buffer without an
+ * LFTagMeta writes no line (the element warns once per stream).
+ *
+ * To join a line with its frame in a file, use "stream_time": the frame's position
+ * in the stream, from 0 at the start of the file, whatever offset the pts carries
+ * (x264enc adds 1000 hours to its output's pts and starts its segment there, so
+ * after it "pts" and "time" are 3600000 s on, while "stream_time" is not).
+ * "running_time" is the pipeline clock's (it starts again from 0 after a seek): use
+ * it to line the detections up with other streams of the same pipeline.
  *
  * A location that cannot be opened for writing fails the state change to PAUSED
  * with an error naming it. Each line goes to the kernel whole, in one write(2)
@@ -40,9 +50,10 @@
  * ]| Thirty lines of JSON on the standard output.
  * |[
  * gst-launch-1.0 -e filesrc location=in.mp4 ! decodebin ! videoconvert ! \
- *     lftagdetect overlay=outline+id ! videoconvert ! x264enc ! \
- *     lftagpublish location=detections.jsonl ! mp4mux ! filesink location=out.mp4
- * ]| An annotated H.264 video and its detections beside it, keyed by timestamp.
+ *     lftagdetect overlay=outline+id ! lftagpublish location=detections.jsonl ! \
+ *     videoconvert ! x264enc ! mp4mux ! filesink location=out.mp4
+ * ]| An annotated H.264 video and its detections beside it, each line keyed to its
+ * frame by "stream_time" (and by "frame" while no frame is dropped).
  */
 #include "gstlftagpublish.h"
 
@@ -410,7 +421,7 @@ static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, Gst
       GST_ELEMENT_WARNING(self, STREAM, FORMAT,
                           ("A buffer without LFTagMeta came: lftagpublish writes the detections of "
                            "lftagdetect, which must be upstream (muxers and files do not keep the "
-                           "meta)."),
+                           "meta, nor do videocrop and videobox, which cannot move its points)."),
                           ("first at %" GST_TIME_FORMAT, GST_TIME_ARGS(GST_BUFFER_PTS(buffer))));
       self->warned_no_meta = TRUE;
     }

@@ -1,18 +1,23 @@
 /* SPDX-License-Identifier: LGPL-2.1-or-later */
 /* The per-buffer metadata of the lftag GStreamer plugin, for applications.
  *
- * Both metas are GstCustomMeta: a GstStructure attached to the buffer, registered
- * with no tags, so videoconvert, videoscale, queue, tee and video encoders keep
- * them. Nothing needs linking: once the plugin has been loaded, read them with
+ * Both metas are GstCustomMeta: a GstStructure attached to the buffer, kept by
+ * videoconvert, videoscale, queue, tee, video encoders and decoders. LFTagTruthMeta
+ * has no tags and passes everywhere unchanged. LFTagMeta is tagged "video" and
+ * "size" (as GstVideoRegionOfInterestMeta): videoscale moves its points and sets
+ * its "width" and "height" to the scaled frame's, and elements that crop or box
+ * the frame (videocrop, videobox), which could not move them, drop it. Nothing
+ * needs linking: once the plugin has been loaded, read them with
  *
  *   C:       GstCustomMeta *m = gst_buffer_get_custom_meta (buf, LFTAG_TRUTH_META_NAME);
  *            const GstStructure *s = m ? gst_custom_meta_get_structure (m) : NULL;
  *   Python:  m = buf.get_custom_meta("LFTagTruthMeta"); s = m.get_structure() if m else None
  *
- * Coordinates are pixels of the frame the meta was made for (its "width" and
- * "height"), with pixel centres at integer coordinates; a consumer of a scaled
- * frame rescales them. A point is a GstValueArray of two doubles <x, y>; a list
- * of points is a GstValueArray of points (numpy.array() reads it as N x 2).
+ * Coordinates are pixels of the frame of the meta's "width" and "height", with
+ * pixel centres at integer coordinates: for LFTagMeta the frame it is on (after
+ * videoscale too), for LFTagTruthMeta the frame rendered. A point is a
+ * GstValueArray of two doubles <x, y>; a list of points is a GstValueArray of
+ * points (numpy.array() reads it as N x 2).
  *
  * LFTagMeta ("LFTagMeta"): what a detector found.
  *   width, height      gint                 the analysed frame

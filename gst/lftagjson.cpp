@@ -30,6 +30,9 @@ std::optional<nlohmann::ordered_json> buffer_json(GstBuffer* buffer, const GstSe
   out["stream_time"] = in_time ? time_json(gst_segment_to_stream_time(&segment, GST_FORMAT_TIME, pts)) : nullptr;
   out["width"] = found->width;
   out["height"] = found->height;
+  // false: passed on without detection (late under late-frames=skip, or unreadable), so
+  // its empty detections say nothing about markers.
+  out["analysed"] = found->analysed;
   nlohmann::ordered_json detections = nlohmann::ordered_json::array();
   for (const Detection& d : found->detections) detections.push_back(nlohmann::ordered_json(tools::detection_json(d)));
   out["detections"] = std::move(detections);

@@ -16,7 +16,8 @@ namespace lftag::gst {
 // buffer carries no LFTagMeta. Keys, in this order: "frame", "pts", "time" (pts in
 // seconds), "dts", "duration", "running_time", "stream_time" (nanoseconds, null when
 // unknown; the last two from `segment`, when it is in time), "width", "height" (the
-// analysed frame) and "detections". Throws std::invalid_argument on a malformed meta.
+// analysed frame), "analysed" (false for a frame passed on without detection) and
+// "detections". Throws std::invalid_argument on a malformed meta.
 std::optional<nlohmann::ordered_json> buffer_json(GstBuffer* buffer, const GstSegment& segment, guint64 frame);
 
 }  // namespace lftag::gst

@@ -3,9 +3,13 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <iterator>
+#include <memory>
 #include <stdexcept>
 #include <string>
+
+#include <gst/video/video.h>
 
 namespace lftag::gst {
 namespace {
@@ -14,7 +18,7 @@ const GstMetaInfo* register_custom(const char* name) {
   // Tests link this code and also load the plugin that holds another copy of it.
   if (const GstMetaInfo* info = gst_meta_get_info(name)) return info;
   // No tags: every element that copies metadata (basetransform, videoconvert,
-  // videoscale, encoders) keeps a tag-less meta as it is.
+  // videoscale, encoders) keeps a tag-less meta as it is (the truth meta).
   const gchar* no_tags[] = {nullptr};
   return gst_meta_register_custom(name, no_tags, nullptr, nullptr, nullptr);
 }
@@ -207,10 +211,83 @@ auto read_list(const GstStructure* s, const char* field, const char* item_name, 
   return out;
 }
 
+// ---- following the frame through videoscale
+
+using StructurePtr = std::unique_ptr<GstStructure, decltype(&gst_structure_free)>;
+
+// A point of the frame in the frame scaled by sx, sy. Pixel centres are at integer
+// coordinates, so it is the frames' edges that map onto each other.
+cv::Point2d scaled(cv::Point2d p, double sx, double sy) { return {(p.x + 0.5) * sx - 0.5, (p.y + 0.5) * sy - 0.5}; }
+
+StructurePtr scaled_detection(const GstStructure* in, double sx, double sy) {
+  StructurePtr out(gst_structure_copy(in), gst_structure_free);
+  for (const char* field : {LFTAG_FIELD_KEYPOINTS, LFTAG_FIELD_CENTROIDS, LFTAG_FIELD_CORNERS}) {
+    std::vector<cv::Point2d> points = get_points(in, field);
+    for (cv::Point2d& p : points) p = scaled(p, sx, sy);
+    set_points(out.get(), field, points);
+  }
+  set_point(out.get(), LFTAG_FIELD_CENTER, scaled(get_point(in, LFTAG_FIELD_CENTER), sx, sy));
+  return out;
+}
+
+// The LFTagMeta's copy into `dest`: as it is, or (videoscale's "gst-video-scale") with its
+// points and frame size in the scaled frame. Poses are the camera's and do not change;
+// nor do the errors measured in pixels of the analysed frame. Any other transform, and a
+// meta that cannot be read, is not copied: dropped rather than left wrong.
+gboolean transform_detection_meta(GstBuffer* dest, GstCustomMeta* meta, GstBuffer*, GQuark type, gpointer data,
+                                  gpointer) {
+  const GstStructure* in = gst_custom_meta_get_structure(meta);
+  StructurePtr out(gst_structure_copy(in), gst_structure_free);
+  if (GST_VIDEO_META_TRANSFORM_IS_SCALE(type)) {
+    const auto* t = static_cast<const GstVideoMetaTransform*>(data);
+    const int in_w = GST_VIDEO_INFO_WIDTH(t->in_info), in_h = GST_VIDEO_INFO_HEIGHT(t->in_info);
+    if (in_w <= 0 || in_h <= 0) return FALSE;
+    const double sx = double(GST_VIDEO_INFO_WIDTH(t->out_info)) / in_w;
+    const double sy = double(GST_VIDEO_INFO_HEIGHT(t->out_info)) / in_h;
+    try {
+      const GValue* list = value_of(in, LFTAG_META_FIELD_DETECTIONS);
+      if (!GST_VALUE_HOLDS_ARRAY(list)) return FALSE;
+      std::vector<StructurePtr> detections;
+      for (guint i = 0; i < gst_value_array_get_size(list); ++i) {
+        const GValue* item = gst_value_array_get_value(list, i);
+        if (!GST_VALUE_HOLDS_STRUCTURE(item)) return FALSE;
+        detections.push_back(scaled_detection(gst_value_get_structure(item), sx, sy));
+      }
+      std::vector<GstStructure*> items;
+      for (StructurePtr& d : detections) items.push_back(d.release());
+      set_structures(out.get(), LFTAG_META_FIELD_DETECTIONS, items);
+      gst_structure_set(out.get(), LFTAG_META_FIELD_WIDTH, G_TYPE_INT,
+                        int(std::lround(get_int(in, LFTAG_META_FIELD_WIDTH) * sx)), LFTAG_META_FIELD_HEIGHT, G_TYPE_INT,
+                        int(std::lround(get_int(in, LFTAG_META_FIELD_HEIGHT) * sy)), nullptr);
+    } catch (const std::invalid_argument&) {
+      return FALSE;
+    }
+  } else if (!GST_META_TRANSFORM_IS_COPY(type)) {
+    return FALSE;
+  }
+  GstStructure* copy = gst_custom_meta_get_structure(gst_buffer_add_custom_meta(dest, LFTAG_META_NAME));
+  gst_structure_foreach(
+      out.get(),
+      [](GQuark field, const GValue* value, gpointer s) -> gboolean {
+        gst_structure_id_set_value(static_cast<GstStructure*>(s), field, value);
+        return TRUE;
+      },
+      copy);
+  return TRUE;
+}
+
 }  // namespace
 
 const GstMetaInfo* detection_meta_info() {
-  static const GstMetaInfo* info = register_custom(LFTAG_META_NAME);
+  static const GstMetaInfo* info = []() -> const GstMetaInfo* {
+    if (const GstMetaInfo* registered = gst_meta_get_info(LFTAG_META_NAME)) return registered;
+    // Tagged "video" and "size" as GstVideoRegionOfInterestMeta is: videoconvert, encoders
+    // and decoders copy it, videoscale scales it (transform_detection_meta), and elements
+    // that crop or box the frame (videocrop, videobox), which could not move its points,
+    // drop it.
+    const gchar* tags[] = {GST_META_TAG_VIDEO_STR, GST_META_TAG_VIDEO_SIZE_STR, nullptr};
+    return gst_meta_register_custom(LFTAG_META_NAME, tags, transform_detection_meta, nullptr, nullptr);
+  }();
   return info;
 }
 

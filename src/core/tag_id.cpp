@@ -19,6 +19,12 @@ int hex_value(char c) {
   return -1;
 }
 
+std::string_view trim(std::string_view text) {
+  while (!text.empty() && (text.front() == ' ' || text.front() == '\t')) text.remove_prefix(1);
+  while (!text.empty() && (text.back() == ' ' || text.back() == '\t')) text.remove_suffix(1);
+  return text;
+}
+
 }  // namespace
 
 TagId TagId::parse(std::string_view text) {
@@ -87,12 +93,22 @@ std::vector<TagId> parse_id_list(std::string_view text, std::size_t max_ids) {
   std::size_t start = 0;
   while (start <= text.size()) {
     const std::size_t comma = std::min(text.find(',', start), text.size());
-    const std::string_view item = text.substr(start, comma - start);
+    // "1, 2" and "3 - 5" as the family lists allow them.
+    const std::string_view item = trim(text.substr(start, comma - start));
+    if (item.empty())
+      throw std::invalid_argument("the id list '" + std::string(text) + "' has an empty item: give ids such as 0-11,40");
     const std::size_t dash = item.find('-');
+    if (dash == 0)
+      throw std::invalid_argument("id '" + std::string(item) + "' is negative: ids start at 0 (a range is FIRST-LAST, " +
+                                  "such as 0-11)");
     if (dash == std::string_view::npos) {
       ids.push_back(TagId::parse(item));
     } else {
-      const TagId lo = TagId::parse(item.substr(0, dash)), hi = TagId::parse(item.substr(dash + 1));
+      const std::string_view first = trim(item.substr(0, dash)), last = trim(item.substr(dash + 1));
+      if (last.empty())
+        throw std::invalid_argument("id range '" + std::string(item) + "' has no last id: a range is FIRST-LAST, " +
+                                    "such as 0-11");
+      const TagId lo = TagId::parse(first), hi = TagId::parse(last);
       if (!lo.fits_u64() || !hi.fits_u64() || hi < lo)
         throw std::invalid_argument("id range '" + std::string(item) + "' must run upwards, below 2^64");
       if (hi.low() - lo.low() >= max_ids) too_many();

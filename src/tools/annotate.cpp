@@ -584,11 +584,31 @@ int Annotator::run() {
     video_.path = o_.output;
   }
   if (!o_.jsonl.empty() && o_.jsonl != "-") jsonl_.path = o_.jsonl;
+  // SIGTERM (what timeout, systemd and docker send) stops the run as Ctrl-C does: the
+  // .part files removed, nothing left that looks complete. Caught from before the first
+  // .part file is made; handled once the main loop runs.
+  struct Interrupt {
+    Annotator* self;
+    int signal;
+    int* caught;
+  };
+  int caught = 0;
+  Interrupt on_int{this, SIGINT, &caught}, on_term{this, SIGTERM, &caught};
+  const auto stop = [](gpointer data) -> gboolean {
+    const auto* interrupt = static_cast<Interrupt*>(data);
+    if (*interrupt->caught == 0) *interrupt->caught = interrupt->signal;
+    g_main_loop_quit(interrupt->self->loop_);
+    return G_SOURCE_CONTINUE;
+  };
+  const guint sigint = g_unix_signal_add(SIGINT, stop, &on_int);
+  const guint sigterm = g_unix_signal_add(SIGTERM, stop, &on_term);
   try {
     video_.check_writable();
     jsonl_.check_writable();
     build();
   } catch (...) {
+    g_source_remove(sigint);
+    g_source_remove(sigterm);
     video_.discard();
     jsonl_.discard();
     throw;
@@ -608,17 +628,6 @@ int Annotator::run() {
         return G_SOURCE_CONTINUE;
       },
       this);
-  bool interrupted = false;
-  std::pair<Annotator*, bool*> interrupt{this, &interrupted};
-  const guint sigint = g_unix_signal_add(
-      SIGINT,
-      [](gpointer data) -> gboolean {
-        auto& [self, flag] = *static_cast<std::pair<Annotator*, bool*>*>(data);
-        *flag = true;
-        g_main_loop_quit(self->loop_);
-        return G_SOURCE_CONTINUE;
-      },
-      &interrupt);
 
   if (gst_element_set_state(pipeline_, GST_STATE_PLAYING) == GST_STATE_CHANGE_FAILURE) {
     // The bus says why (a file that cannot be opened, a calibration that does not load).
@@ -634,18 +643,20 @@ int Annotator::run() {
   }
   g_source_remove(timer);
   g_source_remove(sigint);
+  g_source_remove(sigterm);
   g_source_remove(watch);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   // Closes the files (the muxer wrote its index at EOS).
   gst_element_set_state(pipeline_, GST_STATE_NULL);
 
-  if (interrupted || status_ != 0) {
+  if (caught != 0 || status_ != 0) {
     video_.discard();
     jsonl_.discard();
     if (progress_shown_) std::cerr << "\r\033[K";
-    if (interrupted) {
-      std::cerr << "lftag annotate: interrupted; nothing written\n";
-      return 130;
+    if (caught != 0) {
+      std::cerr << "lftag annotate: interrupted (" << (caught == SIGTERM ? "SIGTERM" : "SIGINT")
+                << "); nothing written\n";
+      return 128 + caught;  // the shell's status for a process the signal stopped
     }
     std::cerr << "lftag annotate: " << error_ << "\n";
     return status_;

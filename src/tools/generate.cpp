@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
+#include <optional>
 #include <stdexcept>
 
 #include "commands.hpp"
@@ -11,7 +12,8 @@
 namespace lftag::tools {
 namespace {
 
-// "100mm", "10cm", "0.1m", "4in" -> metres. A bare number is millimetres.
+// "100mm", "10cm", "0.1m", "4in" -> metres. A bare number is refused: read as
+// millimetres, "--size 0.1" (meant as metres, like --tag-size) made a 2x2 px marker.
 double parse_length(const std::string& text) {
   std::size_t end = 0;
   double value = 0;
@@ -22,7 +24,9 @@ double parse_length(const std::string& text) {
   }
   const std::string unit = text.substr(end);
   double scale = 0;
-  if (unit.empty() || unit == "mm") scale = 0.001;
+  if (unit.empty())
+    throw std::invalid_argument("size '" + text + "' has no unit: give mm, cm, m or in, such as 100mm or 0.1m");
+  if (unit == "mm") scale = 0.001;
   else if (unit == "cm") scale = 0.01;
   else if (unit == "m") scale = 1.0;
   else if (unit == "in") scale = 0.0254;
@@ -43,9 +47,9 @@ void add_generate_command(CLI::App& app, int& status) {
   CLI::App* cmd = app.add_subcommand("generate", "Write a printable marker (or a sheet of markers) as SVG, PDF or PNG.");
   cmd->add_option("--family", opt->family, "Marker family: 2x2, 3x3, 4x4, 5x5, 6x6, 7x7 or 8x8")->required();
   cmd->add_option("--id", opt->ids,
-                  "Marker id, decimal or 0x-hexadecimal; for a sheet a list with ranges, e.g. 0-11,40")
+                  "Marker id, decimal or 0x-hexadecimal; for a sheet a list with ranges, e.g. 0-11,40 or '0-11, 40'")
       ->required();
-  cmd->add_option("--size", opt->size, "Outer edge of the black border: 100mm, 10cm, 0.1m or 4in (default 100mm)")
+  cmd->add_option("--size", opt->size, "Outer edge of the black border, with its unit (mm, cm, m or in): 100mm, 10cm, 0.1m, 4in (default 100mm)")
       ->check(CLI::Validator(
           [](std::string& text) -> std::string {
             try {
@@ -64,20 +68,33 @@ void add_generate_command(CLI::App& app, int& status) {
   cmd->add_option("--paper", opt->paper, "Sheet paper size: a4 or letter (default a4)");
   cmd->add_option("--output,-o", opt->output, "Output file; .svg, .pdf or .png")->required();
   cmd->callback([opt, &status] {
+    // A mistake in the options exits 2, as in detect and annotate; a file that cannot be
+    // written, 1.
+    std::optional<Family> family;
+    std::vector<TagId> ids;
+    PrintOptions print;
+    Paper paper = Paper::a4;
     try {
-      const Family family = Family::parse(opt->family);
-      const std::vector<TagId> ids = parse_id_list(opt->ids);
-      PrintOptions print;
+      family = Family::parse(opt->family);
+      ids = parse_id_list(opt->ids);
+      for (const TagId& id : ids) family->require(id);
       print.size_m = parse_length(opt->size);
       print.margin_units = opt->margin;
       print.caption = !opt->no_caption;
       print.dpi = opt->dpi;
+      paper = parse_paper(opt->paper);
+    } catch (const std::exception& e) {
+      std::cerr << "lftag generate: " << e.what() << "\n";
+      status = 2;
+      return;
+    }
+    try {
       if (opt->sheet || ids.size() > 1) {
-        const int pages = write_sheet(opt->output, family, ids, print, parse_paper(opt->paper));
+        const int pages = write_sheet(opt->output, *family, ids, print, paper);
         std::cerr << "wrote " << ids.size() << " markers on " << pages << " page" << (pages > 1 ? "s" : "")
                   << " to " << opt->output << "\n";
       } else {
-        write_marker(opt->output, family, ids.front(), print);
+        write_marker(opt->output, *family, ids.front(), print);
       }
       status = 0;
     } catch (const std::exception& e) {

@@ -131,6 +131,7 @@ def check_jsonl(lines):
         assert abs(line["pts"] - n * Gst.SECOND / 30) <= Gst.MSECOND, (n, line["pts"])
         assert abs(line["time"] - line["pts"] / Gst.SECOND) < 1e-9
         assert (line["width"], line["height"]) == (640, 480)
+        assert line["analysed"] is True, (n, line["analysed"])  # annotate analyses every frame
         assert list(line)[:3] == ["frame", "pts", "time"], list(line)
 
         def matches(d, m):
@@ -279,8 +280,7 @@ def finds_the_plugin_of_its_build():
     assert len(result.stdout.splitlines()) == FRAMES
 
 
-@case
-def interrupted_run_leaves_nothing():
+def interrupt_leaves_nothing(sig, status):
     long_video = path("long.webm")
     if not os.path.exists(long_video):
         pipeline = Gst.parse_launch("lftagtestsrc num-buffers=900 count=2 ! video/x-raw,width=320,height=240 ! "
@@ -291,15 +291,29 @@ def interrupted_run_leaves_nothing():
     process = subprocess.Popen([lftag, "annotate", long_video, "--output", path("cut.mp4"), "--jsonl",
                                 path("cut.jsonl")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
-    while not os.path.exists(path("cut.mp4.part")) and time.monotonic() < deadline:
+    while not os.path.exists(path("cut.jsonl.part")) and time.monotonic() < deadline:
         time.sleep(0.05)
-    time.sleep(0.5)
-    process.send_signal(signal.SIGINT)
+    # Frames written: the signal comes in the middle of the run.
+    while os.path.getsize(path("cut.jsonl.part")) == 0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert process.poll() is None, "the run ended before the signal"
+    process.send_signal(sig)
     _, stderr = process.communicate(timeout=60)
-    assert process.returncode == 130, (process.returncode, stderr)
-    assert "interrupted" in stderr, stderr
+    assert process.returncode == status, (process.returncode, stderr)
+    assert f"interrupted ({sig.name})" in stderr, stderr
     for name in ("cut.mp4", "cut.mp4.part", "cut.jsonl", "cut.jsonl.part"):
         assert not os.path.exists(path(name)), name
+
+
+@case
+def interrupted_run_leaves_nothing():
+    interrupt_leaves_nothing(signal.SIGINT, 130)
+
+
+@case
+def terminated_run_leaves_nothing():
+    # What timeout, systemd and docker send: it once left out.mp4.part and out.jsonl.part.
+    interrupt_leaves_nothing(signal.SIGTERM, 143)
 
 
 print(f"1..{len(CASES)}")

@@ -538,18 +538,34 @@ GST_START_TEST(test_overlay_composition_meta) {
 GST_END_TEST;
 
 // videoconvert and videoscale keep the LFTagMeta as it was and scale the boxes.
+// Through videoconvert and videoscale (here 640x480 to 320x180, not keeping the aspect)
+// the LFTagMeta's points and frame size follow the frame: each point maps edge to edge,
+// (x + 0.5) * 320 / 640 - 0.5; poses and everything else stay as they were.
 GST_START_TEST(test_metas_after_convert_and_scale) {
   const std::string source =
       "lftagtestsrc num-buffers=2 count=3 seed=21 ! video/x-raw,width=640,height=480 ! lftagdetect";
   Frames direct, scaled;
   pull_frames(direct, source, nullptr, 2);
-  pull_frames(scaled, source + " ! videoconvert ! videoscale", "video/x-raw,format=I420,width=320,height=240", 2);
+  pull_frames(scaled, source + " ! videoconvert ! videoscale", "video/x-raw,format=I420,width=320,height=180", 2);
+  const double sx = 320.0 / 640, sy = 180.0 / 480;
+  const auto near = [&](cv::Point2d small, cv::Point2d big) {
+    return std::abs(small.x - ((big.x + 0.5) * sx - 0.5)) < 1e-9 &&
+           std::abs(small.y - ((big.y + 0.5) * sy - 0.5)) < 1e-9;
+  };
   for (int i = 0; i < 2; ++i) {
-    fail_unless(gst_structure_is_equal(lftag_meta_get_structure(scaled.buffers[i], LFTAG_META_NAME),
-                                       lftag_meta_get_structure(direct.buffers[i], LFTAG_META_NAME)));
-    const FrameDetections frame = detections_of(scaled.buffers[i]);
-    fail_unless(frame.width == 640 && frame.height == 480, "coordinates stay those of the analysed frame");
+    const FrameDetections frame = detections_of(scaled.buffers[i]), original = detections_of(direct.buffers[i]);
+    fail_unless(frame.width == 320 && frame.height == 180, "%dx%d", frame.width, frame.height);
+    fail_unless(frame.analysed == original.analysed);
     fail_unless_equals_int(frame.detections.size(), 3);
+    for (std::size_t k = 0; k < 3; ++k) {
+      const Detection &d = frame.detections[k], &o = original.detections[k];
+      fail_unless(d.id == o.id && d.rvec == o.rvec && d.tvec == o.tvec && d.decode_error == o.decode_error);
+      fail_unless(near(d.center, o.center));
+      for (std::size_t j = 0; j < 4; ++j)
+        fail_unless(near(d.corners[j], o.corners[j]) && near(d.keypoints[j], o.keypoints[j]));
+      fail_unless_equals_int(d.centroids.size(), o.centroids.size());
+      for (std::size_t j = 0; j < d.centroids.size(); ++j) fail_unless(near(d.centroids[j], o.centroids[j]));
+    }
     for (gint id = 0; id < 3; ++id) {
       const GstVideoRegionOfInterestMeta* big = gst_buffer_get_video_region_of_interest_meta_id(direct.buffers[i], id);
       const GstVideoRegionOfInterestMeta* small =
@@ -557,7 +573,38 @@ GST_START_TEST(test_metas_after_convert_and_scale) {
       fail_unless(big && small, "region %d lost", id);
       fail_unless(small->roi_type == g_quark_from_string("lftag"));
       fail_unless(std::abs(int(small->x) - int(big->x) / 2) <= 1 && std::abs(int(small->w) - int(big->w) / 2) <= 1);
-      fail_unless(std::abs(int(small->y) - int(big->y) / 2) <= 1 && std::abs(int(small->h) - int(big->h) / 2) <= 1);
+      fail_unless(std::abs(small->y - big->y * sy) <= 1 && std::abs(small->h - big->h * sy) <= 1);
+    }
+  }
+}
+GST_END_TEST;
+
+// After videoscale the meta's corners and centres are where the detector finds them in
+// the scaled frame, within 0.5 px, up and down.
+GST_START_TEST(test_meta_follows_videoscale) {
+  const std::string source = "lftagtestsrc num-buffers=2 count=3 seed=21 ! video/x-raw,width=640,height=480";
+  for (const char* size : {"width=960,height=720", "width=320,height=240"}) {
+    const std::string caps = std::string("video/x-raw,") + size;
+    Frames moved, found;
+    pull_frames(moved, source + " ! lftagdetect deadline=0 ! videoscale", caps.c_str(), 2);
+    pull_frames(found, source + " ! videoscale ! " + caps + " ! lftagdetect deadline=0", nullptr, 2);
+    for (int i = 0; i < 2; ++i) {
+      const FrameDetections a = detections_of(moved.buffers[i]), b = detections_of(found.buffers[i]);
+      fail_unless(a.width == b.width && a.height == b.height, "%s: %dx%d", size, a.width, a.height);
+      fail_unless_equals_int(a.detections.size(), 3);
+      fail_unless_equals_int(b.detections.size(), 3);
+      for (const Detection& d : a.detections) {
+        const auto e =
+            std::find_if(b.detections.begin(), b.detections.end(), [&](const Detection& x) { return x.id == d.id; });
+        fail_unless(e != b.detections.end(), "%s: %s not found in the scaled frame", size, d.id.to_decimal().c_str());
+        const auto off = [](cv::Point2d p, cv::Point2d q) {
+          return std::max(std::abs(p.x - q.x), std::abs(p.y - q.y));
+        };
+        fail_unless(off(d.center, e->center) <= 0.5, "%s: centre %g px off", size, off(d.center, e->center));
+        for (std::size_t j = 0; j < 4; ++j)
+          fail_unless(off(d.corners[j], e->corners[j]) <= 0.5, "%s: corner %zu %g px off", size, j,
+                      off(d.corners[j], e->corners[j]));
+      }
     }
   }
 }
@@ -657,7 +704,9 @@ GST_END_TEST;
 
 GST_START_TEST(test_messages) {
   GstElement* pipeline =
-      gst_parse_launch("lftagtestsrc num-buffers=10 ids=6789,42 ! lftagdetect name=d ! fakesink name=sink", nullptr);
+      gst_parse_launch("lftagtestsrc num-buffers=10 ids=6789,42 ! lftagdetect name=d message-detections=true ! "
+                       "fakesink name=sink",
+                       nullptr);
   // The meta of every frame, by timestamp, to compare with the messages.
   struct Seen {
     GMutex lock;
@@ -790,7 +839,7 @@ static std::vector<Posted> messages_for(const std::string& properties) {
   GstBuffer* script[] = {none.buffers[0], both.buffers[0], both.buffers[0], one.buffers[0],
                          one.buffers[0],  none.buffers[0], none.buffers[0], one.buffers[0]};
 
-  GstHarness* h = detector("families=3x3 " + properties, both.info);
+  GstHarness* h = detector("families=3x3 message-detections=true " + properties, both.info);
   GstBus* bus = gst_bus_new();
   gst_element_set_bus(h->element, bus);
   for (std::size_t i = 0; i < G_N_ELEMENTS(script); ++i) {
@@ -848,6 +897,51 @@ GST_START_TEST(test_message_modes) {
   fail_unless(posted[2].ids.empty() && posted[2].vanished == one && posted[2].detections == 0);
   fail_unless(posted[3].ids == one && posted[3].appeared == one);
   for (const Posted& p : posted) fail_unless(p.centers == p.ids.size() && p.detections == p.ids.size());
+}
+GST_END_TEST;
+
+// By default a message is compact: the timestamps, ids, centres, appeared, vanished and
+// the frame size, without the full detections (9.7 KB a message with four markers, most
+// of what gst-launch-1.0 -m printed); message-detections=true puts them back at the end.
+GST_START_TEST(test_message_compact_by_default) {
+  GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
+  gboolean full = TRUE;
+  g_object_get(e, "message-detections", &full, nullptr);
+  fail_if(full, "message-detections is on by default");
+  gst_object_unref(e);
+
+  const auto first = [](const std::string& properties) {
+    std::vector<GstMessage*> messages = run_to_eos(
+        "lftagtestsrc count=4 num-buffers=1 ! lftagdetect deadline=0 " + properties + " ! fakesink", GST_MESSAGE_ELEMENT);
+    fail_unless_equals_int(messages.size(), 1);
+    GstStructure* s = gst_structure_copy(gst_message_get_structure(messages[0]));
+    count_and_free(messages);
+    return s;
+  };
+  GstStructure* compact = first("");
+  GstStructure* full_one = first("message-detections=true");
+  fail_if(gst_structure_has_field(compact, "detections"));
+  fail_unless_equals_int(strings_of(compact, "ids").size(), 4);
+  fail_unless_equals_int(gst_value_array_get_size(gst_structure_get_value(compact, "centers")), 4);
+  fail_unless(gst_structure_nth_field_name(compact, gst_structure_n_fields(compact) - 1) == std::string("height"));
+  // The compact fields are the full message's, which ends with the four detections.
+  fail_unless_equals_int(gst_structure_n_fields(full_one), gst_structure_n_fields(compact) + 1);
+  for (int i = 0; i < gst_structure_n_fields(compact); ++i) {
+    const char* name = gst_structure_nth_field_name(compact, i);
+    fail_unless(gst_value_compare(gst_structure_get_value(compact, name), gst_structure_get_value(full_one, name)) ==
+                    GST_VALUE_EQUAL,
+                "%s differs", name);
+  }
+  fail_unless_equals_int(gst_value_array_get_size(gst_structure_get_value(full_one, "detections")), 4);
+  // What gst-launch-1.0 -m prints: under a kilobyte, where the full one is over 8.
+  gchar* compact_text = gst_structure_to_string(compact);
+  gchar* full_text = gst_structure_to_string(full_one);
+  fail_unless(strlen(compact_text) < 1000, "%zu bytes: %s", strlen(compact_text), compact_text);
+  fail_unless(strlen(full_text) > 8000, "%zu bytes", strlen(full_text));
+  g_free(compact_text);
+  g_free(full_text);
+  gst_structure_free(compact);
+  gst_structure_free(full_one);
 }
 GST_END_TEST;
 
@@ -1317,10 +1411,19 @@ GST_START_TEST(test_budget_warning) {
 
   auto warnings = [](const std::string& properties) {
     return stream_warnings("lftagtestsrc count=3 num-buffers=10 ! lftagdetect " + properties + " ! fakesink",
-                           "max-candidates=1");
+                           "held more candidate markers than the per-frame budget allows (max-candidates=1): ");
   };
-  // Three markers a frame: a budget of one cuts all ten frames, and warns once.
+  // Three markers a frame: a budget of one cuts all ten frames, and warns once, naming
+  // that budget and not the outline reads' bound, which was not hit.
   fail_unless_equals_int(warnings("max-candidates=1"), 1);
+  for (GstMessage* m : run_to_eos("lftagtestsrc count=3 num-buffers=2 ! lftagdetect max-candidates=1 deadline=0 ! fakesink",
+                                  GST_MESSAGE_WARNING)) {
+    GError* error = nullptr;
+    gst_message_parse_warning(m, &error, nullptr);
+    fail_if(std::string(error->message).find("outline") != std::string::npos, "%s", error->message);
+    g_error_free(error);
+    gst_message_unref(m);
+  }
   fail_unless_equals_int(warnings(""), 0);
   fail_unless_equals_int(warnings("max-candidates=0"), 0);
 
@@ -1387,8 +1490,11 @@ GST_START_TEST(test_outline_bound_warning) {
       GError* error = nullptr;
       gst_message_parse_warning(m, &error, nullptr);
       const std::string text = error->message;
-      fail_unless(text.find("outline reads were skipped") != std::string::npos &&
-                      text.find(" and 0 outline reads") == std::string::npos,
+      // Named by the bound that was hit: the outline reads', not the candidate budget.
+      fail_unless(text.find("needed more outline reads than the per-frame bound of 32") != std::string::npos &&
+                      text.find("outline reads were skipped") != std::string::npos &&
+                      text.find("candidate markers") == std::string::npos &&
+                      text.find("max-candidates") == std::string::npos && text.find(" 0 ") == std::string::npos,
                   "%s", error->message);
       g_error_free(error);
       gst_message_unref(m);
@@ -1684,10 +1790,12 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_overlay);
   tcase_add_test(tc, test_overlay_composition_meta);
   tcase_add_test(tc, test_metas_after_convert_and_scale);
+  tcase_add_test(tc, test_meta_follows_videoscale);
   tcase_add_test(tc, test_region_metas);
   tcase_add_test(tc, test_region_clipped);
   tcase_add_test(tc, test_messages);
   tcase_add_test(tc, test_message_modes);
+  tcase_add_test(tc, test_message_compact_by_default);
   tcase_add_test(tc, test_message_property_compatible);
   tcase_add_test(tc, test_message_switch_and_empty_frames);
   tcase_add_test(tc, test_message_times_after_seek);

@@ -18,6 +18,7 @@
 #include <gst/check/gstharness.h>
 #include <nlohmann/json.hpp>
 
+#include "frames.hpp"
 #include "json.hpp"
 #include "metaconversion.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
@@ -143,6 +144,9 @@ void expect_lines_match(const std::vector<nlohmann::json>& lines, const Run& run
     gst_structure_get_int(seen.meta, LFTAG_META_FIELD_WIDTH, &width);
     gst_structure_get_int(seen.meta, LFTAG_META_FIELD_HEIGHT, &height);
     fail_unless(line.at("width") == width && line.at("height") == height);
+    gboolean analysed = FALSE;
+    gst_structure_get_boolean(seen.meta, LFTAG_META_FIELD_ANALYSED, &analysed);
+    fail_unless(line.at("analysed") == bool(analysed), "frame %d: analysed %s", int(i), line.at("analysed").dump().c_str());
     nlohmann::json expected = nlohmann::json::array();
     const GValue* list = gst_structure_get_value(seen.meta, LFTAG_META_FIELD_DETECTIONS);
     for (guint k = 0; k < gst_value_array_get_size(list); ++k)
@@ -344,6 +348,36 @@ GST_START_TEST(test_after_encode_and_decode) {
 }
 GST_END_TEST;
 
+// videocrop and videobox cannot move the meta's points: they drop it rather than pass it
+// on wrong, and lftagpublish after them writes nothing and says why. videoscale moves
+// them: its lines are in the scaled frame.
+GST_START_TEST(test_after_crop_and_scale) {
+  const ScratchDir scratch;
+  const std::string path = scratch.path("crop.jsonl");
+  for (const char* element : {"videocrop left=10 top=6", "videobox left=8"}) {
+    Run run;
+    run_pipeline(std::string("lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect ! ") + element +
+                     " ! lftagpublish location=" + path + " ! fakesink name=sink",
+                 run);
+    fail_unless_equals_int(run.buffers.size(), 3);
+    for (const Seen& seen : run.buffers) fail_unless(seen.meta == nullptr, "%s kept the meta", element);
+    fail_unless_equals_int(read_lines(path).size(), 0);
+    fail_unless_equals_int(run.warnings.size(), 1);
+    GError* error = nullptr;
+    gst_message_parse_warning(run.warnings[0], &error, nullptr);
+    fail_unless(has(error->message, "videocrop"), "%s", error->message);
+    g_error_free(error);
+  }
+  Run run;
+  run_pipeline("lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect ! videoscale ! video/x-raw,width=320,height=240 ! "
+               "lftagpublish location=" + path + " ! fakesink name=sink",
+               run);
+  const std::vector<nlohmann::json> lines = read_lines(path);
+  expect_lines_match(lines, run);
+  for (const nlohmann::json& line : lines) fail_unless(line["width"] == 320 && line["height"] == 240);
+}
+GST_END_TEST;
+
 // After a seek the running time starts again at 0 while pts and stream time go on.
 GST_START_TEST(test_times_after_seek) {
   const ScratchDir scratch;
@@ -508,6 +542,84 @@ GST_START_TEST(test_file_replaced_or_moved) {
 }
 GST_END_TEST;
 
+// A frame lftagdetect skips as late (late-frames=skip) is written with "analysed" false,
+// not as a frame without markers; the frames around it are analysed and hold their marker.
+GST_START_TEST(test_late_frame_not_analysed) {
+  const ScratchDir scratch;
+  const std::string path = scratch.path("late.jsonl");
+  Frames frames;
+  pull_frames(frames, "lftagtestsrc num-buffers=3 ids=6789", nullptr, 3);
+  GstHarness* h =
+      gst_harness_new_parse(("lftagdetect deadline=0 late-frames=skip ! lftagpublish location=" + path).c_str());
+  gst_harness_set_src_caps(h, gst_video_info_to_caps(&frames.info));
+  const auto push = [&](int i) {
+    GstBuffer* out = gst_harness_push_and_pull(h, gst_buffer_ref(frames.buffers[i]));
+    fail_unless(out != nullptr, "frame %d was dropped", i);
+    gst_buffer_unref(out);
+  };
+  push(0);
+  // The sink rendered frame 0 50 ms late: frame 1, due before pts(0) + 100 ms, is late.
+  fail_unless(gst_harness_push_upstream_event(
+      h, gst_event_new_qos(GST_QOS_TYPE_UNDERFLOW, 0.5, 50 * GST_MSECOND, GST_BUFFER_PTS(frames.buffers[0]))));
+  push(1);
+  // On time again.
+  fail_unless(gst_harness_push_upstream_event(
+      h, gst_event_new_qos(GST_QOS_TYPE_OVERFLOW, 1.0, -10 * GST_MSECOND, GST_BUFFER_PTS(frames.buffers[1]))));
+  push(2);
+  gst_harness_teardown(h);
+
+  const std::vector<nlohmann::json> lines = read_lines(path);
+  fail_unless_equals_int(lines.size(), 3);
+  for (int i = 0; i < 3; ++i) {
+    const bool late = i == 1;
+    fail_unless(lines[i].at("analysed") == !late, "frame %d: %s", i, lines[i].dump().c_str());
+    fail_unless_equals_int(lines[i].at("detections").size(), late ? 0 : 1);
+  }
+}
+GST_END_TEST;
+
+// Running time and stream time come from the segment, not from the pts: after x264enc,
+// whose segment starts at 1000 hours with stream time 0, and in a segment that also has
+// a base (a second segment of a playlist, say), the three differ.
+GST_START_TEST(test_times_in_a_segment_not_from_zero) {
+  const ScratchDir scratch;
+  const std::string path = scratch.path("segment.jsonl");
+  GstHarness* h = gst_harness_new_parse(("lftagpublish location=" + path).c_str());
+  gst_harness_set_src_caps_str(h, "video/x-raw,format=GRAY8,width=32,height=24,framerate=30/1");
+  const GstClockTime start = 1000 * 3600 * GST_SECOND;
+  struct Case {
+    GstClockTime time, base;
+  };
+  const Case cases[] = {{0, 0}, {10 * GST_SECOND, 5 * GST_SECOND}};
+  for (const Case& c : cases) {
+    GstSegment segment;
+    gst_segment_init(&segment, GST_FORMAT_TIME);
+    segment.start = segment.position = start;
+    segment.time = c.time;
+    segment.base = c.base;
+    fail_unless(gst_harness_push_event(h, gst_event_new_segment(&segment)));
+    for (int k = 0; k < 2; ++k) {
+      GstBuffer* buffer = gst_buffer_new_allocate(nullptr, 32 * 24, nullptr);
+      GST_BUFFER_PTS(buffer) = start + gst_util_uint64_scale(k, GST_SECOND, 30);
+      lftag::gst::add_detection_meta(buffer, 32, 24, {});
+      fail_unless_equals_int(gst_harness_push(h, buffer), GST_FLOW_OK);
+      gst_buffer_unref(gst_harness_pull(h));
+    }
+  }
+  gst_harness_teardown(h);
+
+  const std::vector<nlohmann::json> lines = read_lines(path);
+  fail_unless_equals_int(lines.size(), 4);
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    const Case& c = cases[i / 2];
+    const GstClockTime offset = gst_util_uint64_scale(i % 2, GST_SECOND, 30);
+    fail_unless_equals_uint64(lines[i].at("pts").get<std::uint64_t>(), start + offset);
+    fail_unless_equals_uint64(lines[i].at("stream_time").get<std::uint64_t>(), c.time + offset);
+    fail_unless_equals_uint64(lines[i].at("running_time").get<std::uint64_t>(), c.base + offset);
+  }
+}
+GST_END_TEST;
+
 static Suite* lftagpublish_suite(void) {
   Suite* s = suite_create("lftagpublish");
   TCase* tc = tcase_create("general");
@@ -517,7 +629,10 @@ static Suite* lftagpublish_suite(void) {
   tcase_add_test(tc, test_stdout);
   tcase_add_test(tc, test_unwritable_location);
   tcase_add_test(tc, test_after_encode_and_decode);
+  tcase_add_test(tc, test_after_crop_and_scale);
   tcase_add_test(tc, test_times_after_seek);
+  tcase_add_test(tc, test_times_in_a_segment_not_from_zero);
+  tcase_add_test(tc, test_late_frame_not_analysed);
   tcase_add_test(tc, test_write_error_leaves_whole_lines);
   tcase_add_test(tc, test_no_space_left);
   tcase_add_test(tc, test_directory_removed);

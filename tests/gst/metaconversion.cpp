@@ -1,8 +1,11 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
-// The metas: registration without tags, exact round trips of detections and truth
+// The metas: registration (the truth without tags, the detections tagged for videoscale,
+// which moves their points), exact round trips of detections and truth
 // (through the buffer, copies and the text form), the public C helpers, and errors.
 #include <stdexcept>
 #include <string>
+
+#include <gst/video/video.h>
 
 #include "metaconversion.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
@@ -111,14 +114,21 @@ const GstStructure* item(const GstStructure* s, const char* field, guint i) {
 
 }  // namespace
 
-GST_START_TEST(test_registered_without_tags)
+GST_START_TEST(test_registration)
 {
   for (const GstMetaInfo* info : {lftag::gst::detection_meta_info(), lftag::gst::truth_meta_info()}) {
     fail_unless(info != nullptr);
     fail_unless(gst_meta_info_is_custom(info));
-    const gchar* const* tags = gst_meta_api_type_get_tags(info->api);
-    fail_unless(tags == nullptr || tags[0] == nullptr, "a tag would make videoconvert drop the meta");
   }
+  // The truth has no tags: every element that copies metas keeps it as it is.
+  const gchar* const* tags = gst_meta_api_type_get_tags(lftag::gst::truth_meta_info()->api);
+  fail_unless(tags == nullptr || tags[0] == nullptr, "a tag would make some elements drop the truth");
+  // The detections have "video" and "size", as region metas: videoscale asks them to scale.
+  const GType api = lftag::gst::detection_meta_info()->api;
+  tags = gst_meta_api_type_get_tags(api);
+  fail_unless(tags != nullptr && g_strv_length(const_cast<gchar**>(tags)) == 2);
+  fail_unless(gst_meta_api_type_has_tag(api, g_quark_from_string(GST_META_TAG_VIDEO_STR)) &&
+              gst_meta_api_type_has_tag(api, g_quark_from_string(GST_META_TAG_VIDEO_SIZE_STR)));
   fail_unless(gst_meta_get_info(LFTAG_META_NAME) == lftag::gst::detection_meta_info());
   fail_unless(gst_meta_get_info(LFTAG_TRUTH_META_NAME) == lftag::gst::truth_meta_info());
   // Asking again registers nothing new.
@@ -299,11 +309,66 @@ GST_START_TEST(test_malformed_rejected)
 }
 GST_END_TEST;
 
+// The detection meta's transform: a copy is the same meta; a scale moves every point
+// edge to edge and sets the frame size, leaving poses alone; another transform, or a
+// scale of a meta that cannot be read, copies nothing.
+GST_START_TEST(test_detection_meta_transform)
+{
+  GstBuffer* in = gst_buffer_new();
+  const std::vector<Detection> detections = some_detections();
+  lftag::gst::add_detection_meta(in, 1920, 1080, detections);
+  auto* meta = reinterpret_cast<GstMeta*>(gst_buffer_get_custom_meta(in, LFTAG_META_NAME));
+  const GstMetaInfo* info = meta->info;
+
+  GstBuffer* copy = gst_buffer_copy(in);
+  fail_unless(gst_structure_is_equal(lftag_meta_get_structure(copy, LFTAG_META_NAME),
+                                     lftag_meta_get_structure(in, LFTAG_META_NAME)));
+
+  GstVideoInfo big, small;
+  gst_video_info_set_format(&big, GST_VIDEO_FORMAT_GRAY8, 1920, 1080);
+  gst_video_info_set_format(&small, GST_VIDEO_FORMAT_GRAY8, 480, 360);
+  GstVideoMetaTransform scale = {&big, &small};
+  GstBuffer* scaled = gst_buffer_new();
+  fail_unless(info->transform_func(scaled, meta, in, gst_video_meta_transform_scale_get_quark(), &scale));
+  const auto frame = lftag::gst::read_detection_meta(scaled);
+  fail_unless(frame.has_value() && frame->width == 480 && frame->height == 360);
+  fail_unless_equals_int(frame->detections.size(), detections.size());
+  const auto moved = [](cv::Point2d p, cv::Point2d q) {
+    return std::abs(p.x - ((q.x + 0.5) / 4 - 0.5)) < 1e-9 && std::abs(p.y - ((q.y + 0.5) / 3 - 0.5)) < 1e-9;
+  };
+  for (std::size_t k = 0; k < detections.size(); ++k) {
+    const Detection &d = frame->detections[k], &o = detections[k];
+    fail_unless(moved(d.center, o.center));
+    for (std::size_t j = 0; j < 4; ++j)
+      fail_unless(moved(d.corners[j], o.corners[j]) && moved(d.keypoints[j], o.keypoints[j]));
+    for (std::size_t j = 0; j < o.centroids.size(); ++j) fail_unless(moved(d.centroids[j], o.centroids[j]));
+    fail_unless(d.rvec == o.rvec && d.tvec == o.tvec && d.reprojection_error == o.reprojection_error);
+  }
+
+  GstBuffer* other = gst_buffer_new();
+  fail_if(info->transform_func(other, meta, in, g_quark_from_static_string("lftag-test-other"), nullptr));
+  fail_unless(lftag_meta_get_structure(other, LFTAG_META_NAME) == nullptr);
+
+  GstBuffer* bad = gst_buffer_new();
+  GstStructure* s = gst_custom_meta_get_structure(gst_buffer_add_custom_meta(bad, LFTAG_META_NAME));
+  gst_structure_set(s, LFTAG_META_FIELD_WIDTH, G_TYPE_INT, 1920, LFTAG_META_FIELD_HEIGHT, G_TYPE_INT, 1080, nullptr);
+  lftag::gst::set_detections(s, LFTAG_META_FIELD_DETECTIONS, detections);
+  gst_structure_remove_field(s, LFTAG_META_FIELD_WIDTH);
+  GstBuffer* bad_scaled = gst_buffer_new();
+  fail_if(info->transform_func(bad_scaled, reinterpret_cast<GstMeta*>(gst_buffer_get_custom_meta(bad, LFTAG_META_NAME)),
+                               bad, gst_video_meta_transform_scale_get_quark(), &scale));
+  fail_unless(lftag_meta_get_structure(bad_scaled, LFTAG_META_NAME) == nullptr);
+
+  for (GstBuffer* b : {in, copy, scaled, other, bad, bad_scaled}) gst_buffer_unref(b);
+}
+GST_END_TEST;
+
 static Suite* metaconversion_suite(void) {
   Suite* s = suite_create("metaconversion");
   TCase* tc = tcase_create("general");
   suite_add_tcase(s, tc);
-  tcase_add_test(tc, test_registered_without_tags);
+  tcase_add_test(tc, test_registration);
+  tcase_add_test(tc, test_detection_meta_transform);
   tcase_add_test(tc, test_detections_round_trip);
   tcase_add_test(tc, test_id_fields);
   tcase_add_test(tc, test_truth_round_trip);

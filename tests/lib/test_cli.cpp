@@ -46,24 +46,65 @@ TEST(Cli, GenerateWritesEveryFormat) {
 }
 
 TEST(Cli, GenerateRejectsBadInputWithAMessage) {
+  // A mistake in the options exits 2, as in detect and annotate (an unknown family once
+  // exited 1); a file that cannot be written, 1.
   CliResult r = run("generate --family 9x9 --id 1 --output " + kTmp + "/x.svg");
-  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_NE(r.output.find("unknown family '9x9'"), std::string::npos) << r.output;
   r = run("generate --family 3x3 --id 16384 --output " + kTmp + "/x.svg");
-  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_NE(r.output.find("out of range for family 3x3"), std::string::npos) << r.output;
   r = run("generate --family 3x3 --id 12 --output /nonexistent-dir/x.svg");
-  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("cannot write '/nonexistent-dir/x.svg'"), std::string::npos) << r.output;
   r = run("generate --family 3x3 --id twelve --output " + kTmp + "/x.svg");
-  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_NE(r.output.find("not a decimal number"), std::string::npos) << r.output;
   r = run("generate --family 3x3 --id 1 --size 3furlongs --output " + kTmp + "/x.svg");
-  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_NE(r.output.find("unknown unit"), std::string::npos) << r.output;
+  r = run("generate --family 3x3 --id 1-4 --paper a5 --output " + kTmp + "/x.pdf");
+  EXPECT_EQ(r.status, 2) << r.output;
   r = run("generate --family 3x3 --output " + kTmp + "/x.svg");
-  EXPECT_NE(r.status, 0);
+  EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_NE(r.output.find("--id"), std::string::npos) << r.output;
+}
+
+// A size without a unit is refused, naming the units, and nothing is written: "--size 0.1"
+// once made a 2x2 px PNG (millimetres, where --tag-size is in metres).
+TEST(Cli, GenerateRequiresASizeUnit) {
+  for (const char* size : {"0.1", "100"}) {
+    const std::string out = kTmp + "/nounit.png";
+    std::remove(out.c_str());
+    const CliResult r = run(std::string("generate --family 3x3 --id 1 --size '") + size + "' --output " + out);
+    EXPECT_EQ(r.status, 2) << size << ": " << r.output;
+    EXPECT_NE(r.output.find("no unit"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("mm, cm, m or in"), std::string::npos) << r.output;
+    EXPECT_FALSE(std::ifstream(out).good()) << size;
+  }
+  EXPECT_EQ(run("generate --family 3x3 --id 1 --size 0.1m --output " + kTmp + "/unit.png").status, 0);
+}
+
+// Id lists take spaces as family lists do; a negative or empty id says what is wrong.
+TEST(Cli, GenerateIdListsSayWhatIsWrong) {
+  CliResult r = run("generate --family 3x3 --id '1, 2' --output " + kTmp + "/spaced.pdf");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("wrote 2 markers"), std::string::npos) << r.output;
+  r = run("generate --family 3x3 --id ' 0 - 3 , 7' --output " + kTmp + "/spaced.pdf");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("wrote 5 markers"), std::string::npos) << r.output;
+  r = run("generate --family 3x3 --id -1 --output " + kTmp + "/x.svg");
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("id '-1' is negative"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("''"), std::string::npos) << r.output;
+  for (const char* bad : {"1,,2", "1,"}) {
+    r = run(std::string("generate --family 3x3 --id ") + bad + " --output " + kTmp + "/x.svg");
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find("empty item"), std::string::npos) << bad << ": " << r.output;
+  }
+  r = run("generate --family 3x3 --id 5- --output " + kTmp + "/x.svg");
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("no last id"), std::string::npos) << r.output;
 }
 
 TEST(Cli, GenerateRejectsNumbersItCannotUse) {

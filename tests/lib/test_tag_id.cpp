@@ -71,6 +71,16 @@ TEST(TagId, ParsesLists) {
   EXPECT_EQ(top[1].to_decimal(), "18446744073709551615");
   EXPECT_EQ(lftag::parse_id_list("18446744073709551615-18446744073709551615").size(), 1u);
   EXPECT_THROW(lftag::parse_id_list("1,,2"), std::invalid_argument);
+  // Spaces as family lists allow them; a negative id says so (it once read as an empty
+  // range start, "id '' is not a number").
+  EXPECT_EQ(lftag::parse_id_list("1, 2").size(), 2u);
+  EXPECT_EQ(lftag::parse_id_list(" 3 - 5 ,7 ").size(), 4u);
+  try {
+    lftag::parse_id_list("-1");
+    ADD_FAILURE() << "-1 was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("negative"), std::string::npos) << e.what();
+  }
   EXPECT_THROW(lftag::parse_id_list("0-99", 10), std::invalid_argument);
   EXPECT_THROW(lftag::parse_id_list("1,2,3", 2), std::invalid_argument);
   EXPECT_EQ(lftag::parse_id_list("340282366920938463463374607431768211455").front(), TagId(~0ull, ~0ull));
