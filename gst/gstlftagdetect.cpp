@@ -57,13 +57,15 @@
  * Rodrigues rotation and metres; the marker frame has its origin at the centre,
  * x right, y down, z into the marker), "tag-size" (metres), "calibrated"
  * (boolean), "decode-error", "worst-cell" (the largest offset of a square from
- * its decoded place, marker units), "edge-score" and "reprojection-error"
- * (doubles), "from-outline" (boolean: read from the grey levels under its
- * aligned outline, a far or blurred marker; decode-error and worst-cell are then
- * 0), and the planar pose's other solution: "alternative-rvec",
- * "alternative-tvec", "alternative-reprojection-error" and "ambiguity-ratio" (the
- * latter over reprojection-error: near 1 the pose may be the flip). A point is
- * an array of two doubles, in pixels with pixel centres at integers.
+ * its decoded place, marker units), "noise-margin" (how many standard deviations
+ * of the noise measured on the marker its least certain cell stands from reading
+ * as another digit), "edge-score" and "reprojection-error" (doubles),
+ * "from-outline" (boolean: read from the grey levels under its aligned outline,
+ * a far or blurred marker; decode-error and worst-cell are then 0), and the
+ * planar pose's other solution: "alternative-rvec", "alternative-tvec",
+ * "alternative-reprojection-error" and "ambiguity-ratio" (the latter over
+ * reprojection-error: near 1 the pose may be the flip). A point is an array of
+ * two doubles, in pixels with pixel centres at integers.
  *
  * Poses need the camera: #GstLFTagDetect:calibration-file (OpenCV YAML, XML or
  * JSON, scaled to the frame when it records its own frame size) or

@@ -56,6 +56,10 @@
  *   decode-error       gdouble      decoding error metric, lower is better
  *   worst-cell         gdouble      largest offset of a square from its decoded
  *                                   position, marker units (0.35 is the limit)
+ *   noise-margin       gdouble      standard deviations of the noise measured on the
+ *                                   marker by which its least certain cell stands from
+ *                                   reading as another digit (2 at least for a marker
+ *                                   read by its blobs; 0 for 2x2)
  *   edge-score         gdouble      mean gradient along the inner border edge
  *   reprojection-error gdouble      RMS of the final pose over the centroids, pixels
  *   alternative-rvec, alternative-tvec
@@ -113,6 +117,7 @@ G_BEGIN_DECLS
 #define LFTAG_FIELD_CALIBRATED "calibrated"
 #define LFTAG_FIELD_DECODE_ERROR "decode-error"
 #define LFTAG_FIELD_WORST_CELL "worst-cell"
+#define LFTAG_FIELD_NOISE_MARGIN "noise-margin"
 #define LFTAG_FIELD_EDGE_SCORE "edge-score"
 #define LFTAG_FIELD_FROM_OUTLINE "from-outline"
 #define LFTAG_FIELD_REPROJECTION_ERROR "reprojection-error"

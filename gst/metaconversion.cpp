@@ -307,9 +307,10 @@ GstStructure* detection_structure(const Detection& d) {
   set_vec3(s, LFTAG_FIELD_TVEC, d.tvec);
   gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, d.tag_size, LFTAG_FIELD_CALIBRATED, G_TYPE_BOOLEAN,
                     gboolean(d.calibrated), LFTAG_FIELD_DECODE_ERROR, G_TYPE_DOUBLE, d.decode_error,
-                    LFTAG_FIELD_WORST_CELL, G_TYPE_DOUBLE, d.worst_cell, LFTAG_FIELD_EDGE_SCORE, G_TYPE_DOUBLE,
-                    d.edge_score, LFTAG_FIELD_FROM_OUTLINE, G_TYPE_BOOLEAN, gboolean(d.from_outline),
-                    LFTAG_FIELD_REPROJECTION_ERROR, G_TYPE_DOUBLE, d.reprojection_error, nullptr);
+                    LFTAG_FIELD_WORST_CELL, G_TYPE_DOUBLE, d.worst_cell, LFTAG_FIELD_NOISE_MARGIN, G_TYPE_DOUBLE,
+                    d.noise_margin, LFTAG_FIELD_EDGE_SCORE, G_TYPE_DOUBLE, d.edge_score, LFTAG_FIELD_FROM_OUTLINE,
+                    G_TYPE_BOOLEAN, gboolean(d.from_outline), LFTAG_FIELD_REPROJECTION_ERROR, G_TYPE_DOUBLE,
+                    d.reprojection_error, nullptr);
   set_vec3(s, LFTAG_FIELD_ALTERNATIVE_RVEC, d.alternative_rvec);
   set_vec3(s, LFTAG_FIELD_ALTERNATIVE_TVEC, d.alternative_tvec);
   gst_structure_set(s, LFTAG_FIELD_ALTERNATIVE_REPROJECTION_ERROR, G_TYPE_DOUBLE, d.alternative_reprojection_error,
@@ -375,6 +376,7 @@ Detection detection_from_structure(const GstStructure* s) {
   d.decode_error = get_double(s, LFTAG_FIELD_DECODE_ERROR);
   // Optional: structures from before it was added read as 0.
   if (!gst_structure_get_double(s, LFTAG_FIELD_WORST_CELL, &d.worst_cell)) d.worst_cell = 0;
+  if (!gst_structure_get_double(s, LFTAG_FIELD_NOISE_MARGIN, &d.noise_margin)) d.noise_margin = 0;  // optional too
   d.edge_score = get_double(s, LFTAG_FIELD_EDGE_SCORE);
   gboolean from_outline = FALSE;  // optional, as worst-cell
   if (gst_structure_get_boolean(s, LFTAG_FIELD_FROM_OUTLINE, &from_outline)) d.from_outline = from_outline;

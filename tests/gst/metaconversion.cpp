@@ -37,6 +37,7 @@ Detection make_detection(int n, TagId id, double base) {
   d.calibrated = n % 2 == 0;
   d.decode_error = 1.25e-4 * n;
   d.worst_cell = 0.015 * n;
+  d.noise_margin = 2.5 + n;
   d.edge_score = 42.5 + n;
   d.reprojection_error = 0.03 * n;
   d.alternative_rvec = {-0.1, 0.2, 0.3 + base};
@@ -57,6 +58,7 @@ void expect_equal(const Detection& a, const Detection& b) {
   fail_unless(a.tag_size == b.tag_size && a.calibrated == b.calibrated);
   fail_unless(a.decode_error == b.decode_error && a.edge_score == b.edge_score);
   fail_unless(a.worst_cell == b.worst_cell);
+  fail_unless(a.noise_margin == b.noise_margin);
   fail_unless(a.reprojection_error == b.reprojection_error);
   fail_unless(a.alternative_rvec == b.alternative_rvec && a.alternative_tvec == b.alternative_tvec);
   fail_unless(a.alternative_reprojection_error == b.alternative_reprojection_error);
