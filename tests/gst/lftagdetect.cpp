@@ -42,7 +42,7 @@ constexpr double kMaxTranslationPercent = 2.0;
 
 // A harness around lftagdetect with `properties`, fed frames of `info`. Without the
 // deadline, as the tests that compare detections need: the sanitizer builds take several
-// times its 25 ms on frames that a release build detects in a few.
+// times its 20 ms on frames that a release build detects in a few.
 GstHarness* detector(const std::string& properties, const GstVideoInfo& info) {
   GstHarness* h = gst_harness_new_parse(("lftagdetect name=detect deadline=0 " + properties).c_str());
   gst_harness_set_src_caps(h, gst_video_info_to_caps(&info));

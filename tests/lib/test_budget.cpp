@@ -316,7 +316,7 @@ TEST(Deadline, NeverCutsTheFramesOwnCandidates) {
 TEST(Deadline, ParameterIsValidated) {
   DetectorParams p;
   EXPECT_EQ(p.deadline_ms, 0);  // a library call does all its work
-  EXPECT_EQ(kLiveDeadlineMs, 25);
+  EXPECT_EQ(kLiveDeadlineMs, 20);
   for (double bad : {-1.0, std::nan(""), HUGE_VAL, 1e8}) {
     p.deadline_ms = bad;
     EXPECT_THROW(Detector{p}, std::invalid_argument) << bad;

@@ -275,7 +275,7 @@ nlohmann::json detect_why(const std::string& scene_json, const std::string& imag
   const std::string scene = image + ".json";
   std::ofstream(scene) << scene_json;
   EXPECT_EQ(run("render --margin 6 --scene " + scene + " --output " + image).status, 0);
-  // Without the deadline: the sanitizer build can take longer than its 25 ms over the
+  // Without the deadline: the sanitizer build can take longer than its 20 ms over the
   // second look these tests are about.
   const CliResult r = run("detect --why --stats --deadline 0 --family 3x3 " + image);
   EXPECT_EQ(r.status, 0) << r.output;
@@ -306,6 +306,9 @@ TEST(Cli, DetectWhyNamesTheStageThatStoppedEachCandidate) {
     ++detected;
     EXPECT_TRUE(c["second_look"].get<bool>());
     EXPECT_EQ(c["reading"], 6789);
+    // Read by its blobs: the noise margin it was accepted with, as the detection reports it.
+    EXPECT_GE(c["noise_margin"].get<double>(), 2.0) << c;
+    EXPECT_EQ(c["noise_margin"], o["detections"][0]["noise_margin"]) << c;
   }
   EXPECT_EQ(detected, 1);
   // Without --why there are no candidates.
@@ -336,6 +339,9 @@ TEST(Cli, DetectWhyListsTheOutlineReads) {
     EXPECT_EQ(c["reading"], 6789);
     EXPECT_GE(c["correlation"].get<double>(), 0.75);
     EXPECT_GE(c["margin"].get<double>(), 0.03);
+    // An outline reading reports its noise margin (not bound) as the detection does.
+    EXPECT_GT(c["noise_margin"].get<double>(), 0) << c;
+    EXPECT_EQ(c["noise_margin"], o["detections"][0]["noise_margin"]) << c;
   }
   EXPECT_EQ(detected, 1);
   EXPECT_FALSE(json_lines(run("detect " + img).output)[0].contains("outline_reads"));
