@@ -48,24 +48,10 @@
  *   with #GstLFTagDetect:message-detections (about 2.3 KB a marker: a message
  *   with four markers is 0.4 KB without them, 9.7 KB with them)
  *
- * Each "lftag/detection" structure holds: "family" (string, "3x3"), "id"
- * (guint64, only when the id fits), "id-string" (decimal, always, exact),
- * "keypoints" (4 points: both baseline centres, then the bottom-left and
- * bottom-right data cells), "centroids" (n^2 points, grid order), "corners"
- * (4 points, the outer border clockwise from the marker's top-left), "center"
- * (a point), "rvec" and "tvec" (3 doubles each: marker frame to camera frame,
- * Rodrigues rotation and metres; the marker frame has its origin at the centre,
- * x right, y down, z into the marker), "tag-size" (metres), "calibrated"
- * (boolean), "decode-error", "worst-cell" (the largest offset of a square from
- * its decoded place, marker units), "noise-margin" (how many standard deviations
- * of the noise measured on the marker its least certain cell stands from reading
- * as another digit), "edge-score" and "reprojection-error" (doubles),
- * "from-outline" (boolean: read from the grey levels under its aligned outline,
- * a far or blurred marker; decode-error and worst-cell are then 0), and the
- * planar pose's other solution: "alternative-rvec", "alternative-tvec",
- * "alternative-reprojection-error" and "ambiguity-ratio" (the latter over
- * reprojection-error: near 1 the pose may be the flip). A point is an array of
- * two doubles, in pixels with pixel centres at integers.
+ * The fields of each "lftag/detection" structure (family, id, key points,
+ * centroids, corners, pose, the decoding's quality measures and the pose's other
+ * solution), with their types and units, are documented once, in lftag-meta.h,
+ * which also names each of them with a #define.
  *
  * Poses need the camera: #GstLFTagDetect:calibration-file (OpenCV YAML, XML or
  * JSON, scaled to the frame when it records its own frame size) or

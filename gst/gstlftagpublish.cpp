@@ -19,8 +19,8 @@
  * videoscale), "analysed" (false for a frame lftagdetect passed on without
  * detection: late under late-frames=skip, or unreadable; its empty detections
  * say nothing about markers) and "detections", each as `lftag detect` prints it
- * (family, id, id_hex, keypoints, center, corners, centroids, pose,
- * decode_error, worst_cell, edge_score, reprojection_error). A buffer without an
+ * (the values of lftag-meta.h's detection structure under underscored names,
+ * the pose's under "pose", plus "id_hex"; docs/cli.md, "JSON output"). A buffer without an
  * LFTagMeta writes no line (the element warns once per stream).
  *
  * To join a line with its frame in a file, use "stream_time": the frame's position

@@ -1,6 +1,14 @@
 /* SPDX-License-Identifier: LGPL-2.1-or-later */
 /* The per-buffer metadata of the lftag GStreamer plugin, for applications.
  *
+ * This comment is the one written schema of the metas: the element documentation,
+ * docs/gstreamer.md and the README refer here instead of listing the fields. The
+ * same "lftag/detection" structure is the "lftag" param of lftagdetect's region
+ * metas and the "detections" of its "lftag" bus message (with
+ * message-detections=true). The JSON that lftag detect and lftagpublish write
+ * holds the same values under underscored names, the pose's grouped under "pose"
+ * (docs/cli.md, "JSON output").
+ *
  * Both metas are GstCustomMeta: a GstStructure attached to the buffer, kept by
  * videoconvert, videoscale, queue, tee, video encoders and decoders. LFTagTruthMeta
  * has no tags and passes everywhere unchanged. LFTagMeta is tagged "video" and
