@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: LGPL-2.1-or-later
-# The README's launch lines for lftagdetect, runnable:
+# The launch lines of docs/gstreamer.md ("Pipelines and examples") for lftagdetect, runnable:
 #
 #   examples/pipelines.sh screen                                  synthetic markers on screen
 #   examples/pipelines.sh testsrc-to-file annotated.webm          the same into a video file

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The long soak (README, "Reliability"): 100,000 frames of 1280x720 markers moving
+# The long soak (docs/reliability.md, "Long runs"): 100,000 frames of 1280x720 markers moving
 # through lftagdetect with the overlay, resident memory sampled, then 1,000
 # NULL -> PLAYING -> NULL cycles. Extra arguments go to the soak program (for example
 # --frames 20000). Takes about half an hour on two cores.

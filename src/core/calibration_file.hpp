@@ -13,7 +13,7 @@
 
 namespace lftag::detail {
 
-// The limits of the reader (README.md, "Calibration files", says the same).
+// The limits of the reader (docs/cli.md, "Calibration files", says the same).
 inline constexpr std::size_t kMaxCalibrationBytes = 1 << 20;  // 1 MiB
 inline constexpr int kMaxCalibrationDepth = 32;               // nested mappings and sequences
 inline constexpr int kMaxEntryValues = 256;                   // scalars in one entry that is read

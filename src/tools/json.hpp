@@ -28,7 +28,7 @@ inline nlohmann::json points_json(const std::vector<cv::Point2d>& points) {
 
 inline nlohmann::json vec_json(const cv::Vec3d& v) { return {v[0], v[1], v[2]}; }
 
-// One detection, as every JSON output of the project writes it (the README's schema).
+// One detection, as every JSON output of the project writes it (the schema in docs/cli.md, "JSON output").
 inline nlohmann::json detection_json(const Detection& d) {
   return {{"family", d.family.name()},
           {"id", id_json(d.id)},

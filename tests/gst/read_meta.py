@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: LGPL-2.1-or-later
 """Reads LFTagTruthMeta and lftagdetect's LFTagMeta and region-of-interest metas from Python
-(PyGObject), as gst/lftag-meta.h and the README say one can, after videoconvert and videoscale.
+(PyGObject), as gst/lftag-meta.h and docs/gstreamer.md say one can, after videoconvert and videoscale.
 Reports each case as TAP."""
 import traceback
 

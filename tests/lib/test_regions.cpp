@@ -608,7 +608,7 @@ TEST(Regions, RandomImagesMatchAFloodFillReference) {
 // The worst case for memory: a 1-px checkerboard, a run at every pixel and a region at every
 // other (each black pixel is a 4-connected region of its own; the white is the frame).
 // The labelling's buffers, from their capacities: at most the 20.5 bytes a pixel that
-// the README states (they were about 55).
+// docs/reliability.md ("Memory per pixel") states (they were about 55).
 TEST(Regions, CheckerboardTakesAtMostTwentyBytesAPixel) {
   const int w = 2000, h = 2000;
   BinaryImage binary;

@@ -33,7 +33,7 @@ struct Camera {
   // `distCoeffs` (GStreamer's cameracalibrate), plus optional `image_width`/`image_height`.
   // The file is untrusted input: it is parsed with libyaml, libxml2 or nlohmann-json
   // under limits (at most 1 MiB, no YAML aliases, no XML DTD or entities, bounded
-  // nesting; README.md, "Calibration files"), never with cv::FileStorage, and its
+  // nesting; docs/cli.md, "Calibration files"), never with cv::FileStorage, and its
   // values must pass validate(). Throws std::runtime_error naming the file, what is
   // wrong with it and what was expected.
   static Camera load(const std::string& path);
