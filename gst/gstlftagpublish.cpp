@@ -44,6 +44,11 @@
  * is written and the file is kept as it is (whole lines only); it is closed when
  * the element stops.
  *
+ * At EOS, and when the element stops without one (set to READY or NULL in the
+ * middle of the stream, or after an error elsewhere in the pipeline), every buffer
+ * received has its whole line in the file; the file is then put on the disk
+ * (fdatasync; a disk that fails to is an error) and, when stopping, closed.
+ *
  * ## Example launch lines
  * |[
  * gst-launch-1.0 lftagtestsrc num-buffers=30 ! lftagdetect ! lftagpublish ! fakesink
@@ -102,6 +107,7 @@ struct _GstLFTagPublish {
   ino_t ino;
   guint64 frame;
   guint64 lines;     /* whole lines written since the start */
+  guint64 synced;    /* lines known to be on the disk (fdatasync'd) */
   gboolean failed;   /* an error was posted: nothing more is written */
   guint64 unwritten; /* buffers refused after the error */
   gboolean warned_no_meta;
@@ -212,6 +218,7 @@ static gboolean gst_lftag_publish_start(GstBaseTransform* trans) {
 
   self->frame = 0;
   self->lines = 0;
+  self->synced = 0;
   self->failed = FALSE;
   self->unwritten = 0;
   self->warned_no_meta = FALSE;
@@ -371,11 +378,35 @@ static gboolean gst_lftag_publish_write_line(GstLFTagPublish* self, const std::s
   return FALSE;
 }
 
+/* Puts the lines written since the last call on the disk (fdatasync): at EOS and when
+ * stopping, so that the file is whole even if the machine goes down right after the
+ * pipeline ends. A file that cannot take it (a pipe, /dev/null) is not an error; a disk
+ * that fails to write is, naming the location and how many lines may not be on it. */
+static gboolean gst_lftag_publish_sync(GstLFTagPublish* self) {
+  if (self->fd < 0 || self->to_stdout || self->failed || self->synced == self->lines) return TRUE;
+  if (fdatasync(self->fd) == 0 || errno == EINVAL || errno == EROFS) {
+    self->synced = self->lines;
+    return TRUE;
+  }
+  const int error = errno;
+  const guint64 unsure = self->lines - self->synced;
+  const std::string frames = frames_lines(unsure);
+  GST_ELEMENT_ERROR(
+      self, RESOURCE, SYNC,
+      ("Could not flush %s to the disk: %s; %s may not be on it.", self->opened, g_strerror(error), frames.c_str()),
+      ("fdatasync after %" G_GUINT64_FORMAT " lines, %" G_GUINT64_FORMAT " of them synced before", self->lines,
+       self->synced));
+  self->failed = TRUE;
+  return FALSE;
+}
+
 static gboolean gst_lftag_publish_stop(GstBaseTransform* trans) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
 
-  /* Stopped without EOS: a file gone since the last line is still reported. */
-  gst_lftag_publish_check_file(self, 0);
+  /* Stopped without EOS (set to NULL or READY mid-stream, or after an error
+   * elsewhere): every line received is already in the file; a file gone since the
+   * last line is still reported, and the rest is put on the disk. */
+  if (gst_lftag_publish_check_file(self, 0)) gst_lftag_publish_sync(self);
   if (self->unwritten > 0)
     GST_WARNING_OBJECT(self, "%" G_GUINT64_FORMAT " buffers came after the error and were not written",
                        self->unwritten);
@@ -391,10 +422,12 @@ static gboolean gst_lftag_publish_stop(GstBaseTransform* trans) {
 static gboolean gst_lftag_publish_sink_event(GstBaseTransform* trans, GstEvent* event) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
 
-  /* Every line is written as it comes, so at EOS everything is in the file;
-   * an EOS after an error, or on a file that is gone, goes no further, so that
+  /* Every line is written as it comes, so at EOS everything is in the file and
+   * only has to be put on the disk; an EOS after an error, on a file that is
+   * gone or on a disk that fails, goes no further, so that
    * the application does not take the output for complete. */
-  if (GST_EVENT_TYPE(event) == GST_EVENT_EOS && (self->failed || !gst_lftag_publish_check_file(self, 0))) {
+  if (GST_EVENT_TYPE(event) == GST_EVENT_EOS &&
+      (self->failed || !gst_lftag_publish_check_file(self, 0) || !gst_lftag_publish_sync(self))) {
     gst_event_unref(event);
     return FALSE;
   }
