@@ -12,7 +12,9 @@
  * metas: put lftagpublish before them.
  *
  * Each line holds, in this order: "frame" (the buffer's number in the stream
- * since the element started, from 0, counting buffers without a meta too),
+ * since the element started, from 0, counting buffers without a meta too; with
+ * frame-numbers=stream-time, round(stream time x frame rate), the frame's index
+ * in the file even after frames were lost, as `lftag annotate` writes it),
  * "pts", "time" (the pts in seconds), "dts", "duration", "running_time",
  * "stream_time" (nanoseconds; null when unknown), "width" and "height" (the
  * frame the points are in: the analysed one, or the scaled one after
@@ -81,10 +83,30 @@ enum {
   PROP_0,
   PROP_LOCATION,
   PROP_APPEND,
+  PROP_FRAME_NUMBERS,
 };
+
+/* What "frame" counts. */
+typedef enum {
+  GST_LFTAG_PUBLISH_FRAME_NUMBERS_COUNT,
+  GST_LFTAG_PUBLISH_FRAME_NUMBERS_STREAM_TIME,
+} GstLFTagPublishFrameNumbers;
+
+#define GST_TYPE_LFTAG_PUBLISH_FRAME_NUMBERS (gst_lftag_publish_frame_numbers_get_type())
+static GType gst_lftag_publish_frame_numbers_get_type(void) {
+  static const GEnumValue values[] = {
+      {GST_LFTAG_PUBLISH_FRAME_NUMBERS_COUNT, "The buffer's number since the element started", "count"},
+      {GST_LFTAG_PUBLISH_FRAME_NUMBERS_STREAM_TIME,
+       "round(stream time x frame rate): the frame's index in the file, after a gap too", "stream-time"},
+      {0, nullptr, nullptr},
+  };
+  static const GType type = g_enum_register_static("GstLFTagPublishFrameNumbers", values);
+  return type;
+}
 
 #define DEFAULT_PROP_LOCATION nullptr
 #define DEFAULT_PROP_APPEND FALSE
+#define DEFAULT_PROP_FRAME_NUMBERS GST_LFTAG_PUBLISH_FRAME_NUMBERS_COUNT
 
 static GstStaticPadTemplate sink_template =
     GST_STATIC_PAD_TEMPLATE("sink", GST_PAD_SINK, GST_PAD_ALWAYS, GST_STATIC_CAPS_ANY);
@@ -97,6 +119,7 @@ struct _GstLFTagPublish {
   /* Properties, under the object lock. */
   gchar* location;
   gboolean append;
+  GstLFTagPublishFrameNumbers frame_numbers;
 
   /* Streaming state: opened in start(), closed in stop(). */
   int fd;             /* -1: none */
@@ -106,6 +129,7 @@ struct _GstLFTagPublish {
   dev_t dev;          /* the identity of the file opened */
   ino_t ino;
   guint64 frame;
+  gint fps_n, fps_d; /* from the caps; fps_n 0: unknown or variable */
   guint64 lines;     /* whole lines written since the start */
   guint64 synced;    /* lines known to be on the disk (fdatasync'd) */
   gboolean failed;   /* an error was posted: nothing more is written */
@@ -119,6 +143,7 @@ static void gst_lftag_publish_finalize(GObject* object);
 static gboolean gst_lftag_publish_start(GstBaseTransform* trans);
 static gboolean gst_lftag_publish_stop(GstBaseTransform* trans);
 static gboolean gst_lftag_publish_sink_event(GstBaseTransform* trans, GstEvent* event);
+static gboolean gst_lftag_publish_set_caps(GstBaseTransform* trans, GstCaps* incaps, GstCaps* outcaps);
 static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, GstBuffer* buffer);
 
 #define gst_lftag_publish_parent_class parent_class
@@ -145,6 +170,14 @@ static void gst_lftag_publish_class_init(GstLFTagPublishClass* klass) {
   g_object_class_install_property(gobject_class, PROP_APPEND,
                                   g_param_spec_boolean("append", "Append", "Append to the file instead of replacing it",
                                                        DEFAULT_PROP_APPEND, ready));
+  g_object_class_install_property(
+      gobject_class, PROP_FRAME_NUMBERS,
+      g_param_spec_enum("frame-numbers", "Frame numbers",
+                        "What \"frame\" counts: count, the buffers since the start; stream-time, round(stream "
+                        "time x frame rate), the frame's index in the file even after frames are lost (the count "
+                        "without a frame rate in the caps)",
+                        GST_TYPE_LFTAG_PUBLISH_FRAME_NUMBERS, DEFAULT_PROP_FRAME_NUMBERS, ready));
+  gst_type_mark_as_plugin_api(GST_TYPE_LFTAG_PUBLISH_FRAME_NUMBERS, GstPluginAPIFlags(0));
 
   gst_element_class_set_static_metadata(element_class, "LFTag detections as JSON Lines", "Filter/Metadata",
                                         "Writes the LFTag detections of each buffer (its LFTagMeta, from lftagdetect) "
@@ -157,12 +190,16 @@ static void gst_lftag_publish_class_init(GstLFTagPublishClass* klass) {
   trans_class->start = GST_DEBUG_FUNCPTR(gst_lftag_publish_start);
   trans_class->stop = GST_DEBUG_FUNCPTR(gst_lftag_publish_stop);
   trans_class->sink_event = GST_DEBUG_FUNCPTR(gst_lftag_publish_sink_event);
+  trans_class->set_caps = GST_DEBUG_FUNCPTR(gst_lftag_publish_set_caps);
   trans_class->transform_ip = GST_DEBUG_FUNCPTR(gst_lftag_publish_transform_ip);
 }
 
 static void gst_lftag_publish_init(GstLFTagPublish* self) {
   self->location = nullptr;
   self->append = DEFAULT_PROP_APPEND;
+  self->frame_numbers = DEFAULT_PROP_FRAME_NUMBERS;
+  self->fps_n = 0;
+  self->fps_d = 1;
   self->fd = -1;
   self->to_stdout = FALSE;
   self->path = nullptr;
@@ -191,6 +228,7 @@ static void gst_lftag_publish_set_property(GObject* object, guint prop_id, const
       self->location = g_value_dup_string(value);
       break;
     case PROP_APPEND: self->append = g_value_get_boolean(value); break;
+    case PROP_FRAME_NUMBERS: self->frame_numbers = GstLFTagPublishFrameNumbers(g_value_get_enum(value)); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
   GST_OBJECT_UNLOCK(self);
@@ -203,6 +241,7 @@ static void gst_lftag_publish_get_property(GObject* object, guint prop_id, GValu
   switch (prop_id) {
     case PROP_LOCATION: g_value_set_string(value, self->location); break;
     case PROP_APPEND: g_value_set_boolean(value, self->append); break;
+    case PROP_FRAME_NUMBERS: g_value_set_enum(value, self->frame_numbers); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
   GST_OBJECT_UNLOCK(self);
@@ -434,9 +473,38 @@ static gboolean gst_lftag_publish_sink_event(GstBaseTransform* trans, GstEvent* 
   return GST_BASE_TRANSFORM_CLASS(parent_class)->sink_event(trans, event);
 }
 
+/* Any caps: raw or encoded video both give their frame rate. */
+static gboolean gst_lftag_publish_set_caps(GstBaseTransform* trans, GstCaps* incaps, GstCaps*) {
+  GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
+  gint n = 0, d = 1;
+  if (gst_caps_get_size(incaps) == 0 ||
+      !gst_structure_get_fraction(gst_caps_get_structure(incaps, 0), "framerate", &n, &d) || n <= 0 || d <= 0) {
+    n = 0;
+    d = 1;
+  }
+  self->fps_n = n;
+  self->fps_d = d;
+  return TRUE;
+}
+
+/* The "frame" of `buffer`: the count, or with frame-numbers=stream-time its stream time
+ * in frames, so that a frame keeps the number it has in the file when frames before it
+ * were lost (a damaged file, a decoder error). */
+static guint64 gst_lftag_publish_frame_number(GstLFTagPublish* self, GstBaseTransform* trans, GstBuffer* buffer,
+                                              guint64 count) {
+  GST_OBJECT_LOCK(self);
+  const bool by_time = self->frame_numbers == GST_LFTAG_PUBLISH_FRAME_NUMBERS_STREAM_TIME;
+  GST_OBJECT_UNLOCK(self);
+  if (!by_time || self->fps_n == 0 || trans->segment.format != GST_FORMAT_TIME || !GST_BUFFER_PTS_IS_VALID(buffer))
+    return count;
+  const GstClockTime t = gst_segment_to_stream_time(&trans->segment, GST_FORMAT_TIME, GST_BUFFER_PTS(buffer));
+  if (!GST_CLOCK_TIME_IS_VALID(t)) return count;
+  return gst_util_uint64_scale_round(t, guint64(self->fps_n), guint64(self->fps_d) * GST_SECOND);
+}
+
 static GstFlowReturn gst_lftag_publish_transform_ip(GstBaseTransform* trans, GstBuffer* buffer) {
   GstLFTagPublish* self = GST_LFTAG_PUBLISH(trans);
-  const guint64 frame = self->frame++;
+  const guint64 frame = gst_lftag_publish_frame_number(self, trans, buffer, self->frame++);
 
   if (self->failed) {
     ++self->unwritten;

@@ -790,6 +790,39 @@ GST_START_TEST(test_every_frame_after_an_error_downstream) {
 }
 GST_END_TEST;
 
+// frame-numbers=stream-time numbers each frame by its stream time and the caps' frame
+// rate, so that after frames are lost the numbers are still the file's frame indices; the
+// default counts buffers.
+GST_START_TEST(test_frame_numbers_by_stream_time) {
+  for (const char* numbers : {"count", "stream-time"}) {
+    const ScratchDir scratch;
+    const std::string path = scratch.path("numbers.jsonl");
+    GstHarness* h =
+        gst_harness_new_parse(("lftagpublish frame-numbers=" + std::string(numbers) + " location=" + path).c_str());
+    gst_harness_set_src_caps_str(h, "video/x-raw,format=GRAY8,width=32,height=24,framerate=25/1");
+    // Frames 10 to 14 missing; the segment starts at 1 s of pts, so stream time is pts - 1 s.
+    GstSegment segment;
+    gst_segment_init(&segment, GST_FORMAT_TIME);
+    segment.start = segment.position = GST_SECOND;
+    fail_unless(gst_harness_push_event(h, gst_event_new_segment(&segment)));
+    const std::vector<int> frames = {0, 1, 9, 15, 16};
+    for (const int frame : frames) {
+      GstBuffer* buffer = gst_buffer_new_allocate(nullptr, 32 * 24, nullptr);
+      GST_BUFFER_PTS(buffer) = GST_SECOND + gst_util_uint64_scale(frame, GST_SECOND, 25) + 3 * GST_MSECOND;
+      lftag::gst::add_detection_meta(buffer, 32, 24, {});
+      fail_unless_equals_int(gst_harness_push(h, buffer), GST_FLOW_OK);
+      gst_buffer_unref(gst_harness_pull(h));
+    }
+    gst_harness_teardown(h);
+    const std::vector<nlohmann::json> lines = read_lines(path);
+    fail_unless_equals_int(lines.size(), frames.size());
+    const bool by_time = std::string(numbers) == "stream-time";
+    for (std::size_t i = 0; i < lines.size(); ++i)
+      fail_unless_equals_int(lines[i].at("frame").get<int>(), by_time ? frames[i] : int(i));
+  }
+}
+GST_END_TEST;
+
 static Suite* lftagpublish_suite(void) {
   Suite* s = suite_create("lftagpublish");
   TCase* tc = tcase_create("general");
@@ -807,6 +840,7 @@ static Suite* lftagpublish_suite(void) {
   tcase_add_test(tc, test_no_space_left);
   tcase_add_test(tc, test_directory_removed);
   tcase_add_test(tc, test_file_replaced_or_moved);
+  tcase_add_test(tc, test_frame_numbers_by_stream_time);
   tcase_add_test(tc, test_every_frame_at_eos);
   tcase_add_test(tc, test_every_frame_when_stopped_mid_stream);
   tcase_add_test(tc, test_every_frame_after_an_error_downstream);
