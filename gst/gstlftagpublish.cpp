@@ -479,7 +479,7 @@ static gboolean gst_lftag_publish_start_mqtt(GstLFTagPublish* self) {
   return TRUE;
 #else
   GST_ELEMENT_ERROR(self, RESOURCE, SETTINGS,
-                    ("This lftagpublish was built without MQTT (libmosquitto was not found): install "
+                    ("This lftagpublish was built without MQTT (no libmosquitto, or -Dmqtt=disabled): install "
                      "libmosquitto-dev and rebuild, or use target=file."),
                     (nullptr));
   return FALSE;

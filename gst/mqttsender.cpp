@@ -88,6 +88,7 @@ bool MqttSender::start(const MqttSettings& settings, std::string& why) {
     mosquitto_lib_init();
   });
   settings_ = settings;
+  stopping_ = false;  // before any thread that reads it starts
   if (mosquitto_pub_topic_check(settings_.topic.c_str()) != MOSQ_ERR_SUCCESS) {
     why = "'" + settings_.topic + "' is not a topic to publish to (not empty, no '+' or '#')";
     return false;
@@ -169,7 +170,6 @@ bool MqttSender::start(const MqttSettings& settings, std::string& why) {
       return false;
     }
   }
-  stopping_ = false;
   sender_ = std::thread([this, connecting] {
     if (connecting || connect_first()) send_loop();
   });

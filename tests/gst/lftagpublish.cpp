@@ -823,6 +823,25 @@ GST_START_TEST(test_frame_numbers_by_stream_time) {
 }
 GST_END_TEST;
 
+#if !LFTAG_HAVE_MQTT
+// A build without libmosquitto: target=mqtt fails the start, saying what to install.
+GST_START_TEST(test_mqtt_needs_libmosquitto) {
+  GstElement* pipeline =
+      gst_parse_launch("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ! fakesink", nullptr);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) == GST_STATE_CHANGE_FAILURE);
+  const Posted error = parse_error(gst_bus_pop_filtered(bus, GST_MESSAGE_ERROR));
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+  fail_unless_equals_string(error.source.c_str(), "p");
+  fail_unless(has(error.message, "without MQTT") && has(error.message, "libmosquitto-dev") &&
+                  has(error.message, "target=file"),
+              "%s", error.message.c_str());
+}
+GST_END_TEST;
+#endif
+
 static Suite* lftagpublish_suite(void) {
   Suite* s = suite_create("lftagpublish");
   TCase* tc = tcase_create("general");
@@ -844,6 +863,9 @@ static Suite* lftagpublish_suite(void) {
   tcase_add_test(tc, test_every_frame_at_eos);
   tcase_add_test(tc, test_every_frame_when_stopped_mid_stream);
   tcase_add_test(tc, test_every_frame_after_an_error_downstream);
+#if !LFTAG_HAVE_MQTT
+  tcase_add_test(tc, test_mqtt_needs_libmosquitto);
+#endif
   return s;
 }
 

@@ -76,6 +76,9 @@ class Broker {
     g_free(dir);
     std::ofstream(dir_ + "/mosquitto.conf") << "listener " << port_ << " 127.0.0.1\n"
                                             << "allow_anonymous true\n"
+                                            // Started as root, mosquitto would become the
+                                            // "mosquitto" user, who cannot write here.
+                                            << "user " << g_get_user_name() << "\n"
                                             << "persistence true\n"
                                             << "persistence_location " << dir_ << "/\n"
                                             << "log_dest file " << dir_ << "/broker.log\n";
