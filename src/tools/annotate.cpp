@@ -636,7 +636,8 @@ std::string Annotator::damage_text() const {
     text += (text.empty() ? "" : ", ") + std::to_string(n) + " " + (n == 1 ? one : many) + more;
   };
   add(decoder_errors_, "decoder error", "decoder errors");
-  add(gaps_, "timestamp gap", "timestamp gaps", " (" + std::to_string(missing_frames_) + " frames missing)");
+  add(gaps_, "timestamp gap", "timestamp gaps",
+      " (" + std::to_string(missing_frames_) + (missing_frames_ == 1 ? " frame" : " frames") + " missing)");
   add(backwards_, "timestamp out of order", "timestamps out of order");
   add(cut_frames_, "frame missing at the end", "frames missing at the end");
   return text;
