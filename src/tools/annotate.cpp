@@ -7,7 +7,10 @@
 //     ! videoconvert ! capsfilter ! ENCODER ! MUXER ! filesink      (or fakesink)
 //
 // Files are written as NAME.part and renamed when the stream has ended, so a failed or
-// interrupted run leaves no file that looks complete.
+// interrupted run leaves no file that looks complete. A damaged input (decoder errors,
+// frames missing, timestamps out of order, a file cut short) is annotated as far as it
+// decodes, with a warning for each problem and their counts in the summary; --strict makes
+// it exit status 3.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -37,6 +40,7 @@
 #include "lftag-meta.h"
 #include "lftag/camera.hpp"
 #include "lftag/family.hpp"
+#include "timestamps.hpp"
 
 namespace lftag::tools {
 namespace {
@@ -164,10 +168,60 @@ Output choose_output(const std::string& path) {
     for (const Codec* codec : c.codecs)
       for (const Encoder& e : codec->encoders)
         want += std::string(want.empty() ? "" : ", or ") + e.package + " (" + e.factory + ", " + codec->name + ")";
+    // The fallback only when it would work.
+    const bool webm = ext != ".webm" && installed("webmmux") && installed(kVp8.factory);
     throw std::runtime_error("no encoder for " + ext + " files: install " + want +
-                             (ext == ".webm" ? std::string() : ", or write a .webm file (VP8)"));
+                             (webm ? ", or write a .webm file (VP8)" : std::string()));
   }
   throw std::invalid_argument("cannot tell the video type of '" + path + "' from its extension: use one of " + known);
+}
+
+// ---------------------------------------------------------------------------
+// Decoders
+
+// Debian 12's decoders of the common video codecs, by media type.
+struct Decoder {
+  const char* media_type;
+  const char* factory;
+  const char* package;
+};
+const std::vector<Decoder>& decoders() {
+  static const std::vector<Decoder> all = {
+      {"video/x-h264", "avdec_h264", "gstreamer1.0-libav"},
+      {"video/x-h264", "openh264dec", "gstreamer1.0-plugins-bad"},
+      {"video/x-h265", "avdec_h265", "gstreamer1.0-libav"},
+      {"video/x-vp8", "vp8dec", "gstreamer1.0-plugins-good"},
+      {"video/x-vp9", "vp9dec", "gstreamer1.0-plugins-good"},
+      {"video/x-av1", "dav1ddec", "gstreamer1.0-plugins-bad"},
+      {"video/x-av1", "avdec_av1", "gstreamer1.0-libav"},
+      {"image/jpeg", "jpegdec", "gstreamer1.0-plugins-good"},
+      {"video/mpeg", "avdec_mpeg4", "gstreamer1.0-libav"},
+      {"video/mpeg", "mpeg2dec", "gstreamer1.0-plugins-ugly"},
+      {"video/x-theora", "theoradec", "gstreamer1.0-plugins-base"},
+  };
+  return all;
+}
+
+// What to install for streams of `caps` (caps strings) that GStreamer found no decoder
+// for: only packages whose decoder is not there (gst_element_factory_find), since
+// suggesting one that is installed would not help.
+std::string decoder_hint(const std::vector<std::string>& caps) {
+  std::vector<std::string> want;
+  bool known = false;
+  for (const std::string& c : caps) {
+    const std::string type = c.substr(0, c.find(','));
+    for (const Decoder& d : decoders()) {
+      if (type != d.media_type) continue;
+      known = true;
+      const std::string item = std::string(d.package) + " (" + d.factory + ")";
+      if (!installed(d.factory) && std::find(want.begin(), want.end(), item) == want.end()) want.push_back(item);
+    }
+  }
+  if (known && want.empty()) return "its decoders are installed but none accepts this stream (LFTAG_DEBUG=1 shows it)";
+  if (want.empty()) return "install gstreamer1.0-libav (most formats), or gstreamer1.0-plugins-bad";
+  std::string text = "install ";
+  for (std::size_t i = 0; i < want.size(); ++i) text += (i ? ", or " : "") + want[i];
+  return text;
 }
 
 // ---------------------------------------------------------------------------
@@ -175,7 +229,7 @@ Output choose_output(const std::string& path) {
 
 struct Options : DetectorOptions {
   std::string input, output, jsonl, overlay;
-  bool quiet = false;
+  bool quiet = false, strict = false;
 };
 
 // "outline,id,axes" (or with '+', or "none") as the overlay property's flags.
@@ -242,6 +296,11 @@ class Annotator {
   GstElement* make(const char* factory, const char* package);
   void on_pad_added(GstPad* pad);
   GstPadProbeReturn on_buffer(GstBuffer* buffer);
+  void on_decoded(GstPadProbeInfo* info);
+  void report_damage(const char* kind, std::int64_t missing, const std::string& text);
+  void count_damage(const GstStructure* s);
+  void check_end();
+  std::string damage_text() const;
   bool on_message(GstMessage* message);
   void progress(bool final);
   void fail(const std::string& why);
@@ -260,6 +319,7 @@ class Annotator {
   int status_ = 0;
   std::string error_;
   std::vector<std::string> missing_;  // decoders and demuxers GStreamer said it lacks
+  std::vector<std::string> missing_caps_;  // the streams they were for
   bool video_linked_ = false;
   bool tty_ = false, progress_shown_ = false;
   int last_tenth_ = -1;
@@ -269,6 +329,14 @@ class Annotator {
   std::atomic<std::uint64_t> frames_{0};
   std::atomic<std::int64_t> first_pts_{-1}, position_{-1};  // ns; position from the first frame
   std::mutex seen_lock_;
+  // The decoded stream, as it reaches the pipeline (under damage_lock_).
+  std::mutex damage_lock_;
+  TimestampWatch watch_;
+  GstSegment segment_;
+  bool decoded_any_ = false;
+  // Damage found, counted in the main thread.
+  std::uint64_t decoder_errors_ = 0, gaps_ = 0, missing_frames_ = 0, backwards_ = 0, cut_frames_ = 0;
+  int damage_shown_ = 0;
   std::map<std::pair<std::string, std::string>, std::uint64_t> seen_;  // (family, id) -> frames
 };
 
@@ -319,6 +387,17 @@ void Annotator::build() {
   GstElement* detect = make("lftagdetect", "the lftag plugin");
   first_ = queue;
   gst_element_link_many(queue, convert, detect, nullptr);
+  // The decoded frames as they come out of the decoder: their timestamps and flags tell
+  // of damage in the file.
+  gst_segment_init(&segment_, GST_FORMAT_TIME);
+  GstPad* decoded = gst_element_get_static_pad(queue, "sink");
+  gst_pad_add_probe(decoded, GstPadProbeType(GST_PAD_PROBE_TYPE_BUFFER | GST_PAD_PROBE_TYPE_EVENT_DOWNSTREAM),
+                    [](GstPad*, GstPadProbeInfo* info, gpointer self) {
+                      static_cast<Annotator*>(self)->on_decoded(info);
+                      return GST_PAD_PROBE_OK;
+                    },
+                    this, nullptr);
+  gst_object_unref(decoded);
 
   // The detector, as `lftag detect` would be set up.
   const bool camera = !o_.calibration.empty() || o_.fx.has_value();
@@ -351,6 +430,8 @@ void Annotator::build() {
   if (!o_.jsonl.empty()) {
     GstElement* publish = make("lftagpublish", "the lftag plugin");
     g_object_set(publish, "location", o_.jsonl == "-" ? "-" : jsonl_.part().c_str(), nullptr);
+    // "frame" is the frame's index in the file, after a gap too.
+    set(publish, "frame-numbers", "stream-time");
     gst_element_link(last, publish);
     last = publish;
   }
@@ -441,6 +522,127 @@ GstPadProbeReturn Annotator::on_buffer(GstBuffer* buffer) {
   return GST_PAD_PROBE_OK;
 }
 
+// "1:02.345": where in the video a problem is.
+std::string position_text(std::int64_t ns) {
+  if (ns < 0) return "?";
+  const double s = double(ns) / GST_SECOND;
+  char text[32];
+  std::snprintf(text, sizeof text, "%ld:%06.3f", long(s) / 60, std::fmod(s, 60.0));
+  return text;
+}
+
+// In the streaming thread: each decoded frame's stream time, checked for gaps and order; a
+// frame marked DISCONT after the first is one the decoder (or the demuxer) resumed at
+// after damaged data. What is found goes to the main thread as an application message.
+void Annotator::on_decoded(GstPadProbeInfo* info) {
+  std::lock_guard<std::mutex> lock(damage_lock_);
+  if (info->type & GST_PAD_PROBE_TYPE_EVENT_DOWNSTREAM) {
+    GstEvent* event = GST_PAD_PROBE_INFO_EVENT(info);
+    if (GST_EVENT_TYPE(event) == GST_EVENT_SEGMENT) {
+      const GstSegment* segment = nullptr;
+      gst_event_parse_segment(event, &segment);
+      gst_segment_copy_into(segment, &segment_);
+    } else if (GST_EVENT_TYPE(event) == GST_EVENT_CAPS) {
+      GstCaps* caps = nullptr;
+      gst_event_parse_caps(event, &caps);
+      int n = 0, d = 1;
+      if (caps && gst_caps_get_size(caps) > 0 &&
+          !gst_structure_get_fraction(gst_caps_get_structure(caps, 0), "framerate", &n, &d))
+        n = 0;
+      watch_.set_rate(n, d);
+    }
+    return;
+  }
+  GstBuffer* buffer = GST_PAD_PROBE_INFO_BUFFER(info);
+  if (!GST_BUFFER_PTS_IS_VALID(buffer) || segment_.format != GST_FORMAT_TIME) return;
+  const GstClockTime stream_time = gst_segment_to_stream_time(&segment_, GST_FORMAT_TIME, GST_BUFFER_PTS(buffer));
+  if (!GST_CLOCK_TIME_IS_VALID(stream_time)) return;
+  const auto t = std::int64_t(stream_time);
+  const auto duration = GST_BUFFER_DURATION_IS_VALID(buffer) ? std::int64_t(GST_BUFFER_DURATION(buffer)) : -1;
+  const auto frame = [this](std::int64_t at) {
+    return watch_.has_rate() ? " (frame " + std::to_string(watch_.index(at)) + ")" : std::string();
+  };
+  if (decoded_any_ && GST_BUFFER_FLAG_IS_SET(buffer, GST_BUFFER_FLAG_DISCONT))
+    report_damage("decoder", 0, "damaged data in '" + o_.input + "': decoding resumed at " + position_text(t) +
+                                    frame(t) + " after an error");
+  decoded_any_ = true;
+  const std::optional<TimestampWatch::Finding> found = watch_.frame(t, duration);
+  if (!found) return;
+  if (found->kind == TimestampWatch::Kind::kGap) {
+    const std::string frames = std::to_string(found->missing) + (found->missing == 1 ? " frame" : " frames");
+    report_damage("gap", found->missing,
+                  frames + " missing in '" + o_.input + "' between " + position_text(found->previous) +
+                      frame(found->previous) + " and " + position_text(t) + frame(t) + " (a gap in the timestamps)");
+  } else {
+    report_damage("backwards", 0,
+                  "the frame at " + position_text(t) + frame(t) + " in '" + o_.input +
+                      "' does not come after the one before it (" + position_text(found->previous) +
+                      "): its timestamp repeats or goes back");
+  }
+}
+
+// From either thread: one damage warning, counted and printed in the main thread.
+void Annotator::report_damage(const char* kind, std::int64_t missing, const std::string& text) {
+  gst_element_post_message(
+      pipeline_, gst_message_new_application(GST_OBJECT(pipeline_),
+                                             gst_structure_new("lftag-damage", "kind", G_TYPE_STRING, kind, "missing",
+                                                               G_TYPE_INT64, missing, "text", G_TYPE_STRING,
+                                                               text.c_str(), nullptr)));
+}
+
+void Annotator::count_damage(const GstStructure* s) {
+  const std::string kind = gst_structure_get_string(s, "kind");
+  gint64 missing = 0;
+  gst_structure_get_int64(s, "missing", &missing);
+  if (kind == "decoder") ++decoder_errors_;
+  if (kind == "gap") ++gaps_, missing_frames_ += std::uint64_t(missing);
+  if (kind == "backwards") ++backwards_;
+  if (kind == "end") cut_frames_ += std::uint64_t(missing);
+  // A badly damaged file would bury the progress in warnings: the first ones are shown,
+  // all are counted.
+  constexpr int kShown = 20;
+  if (++damage_shown_ <= kShown)
+    print_line("lftag annotate: warning: " + std::string(gst_structure_get_string(s, "text")));
+  if (damage_shown_ == kShown) print_line("lftag annotate: warning: further damage is counted, not shown");
+}
+
+// At EOS: a stream that ends before the duration its container gives (a file cut short,
+// or whose end is unreadable). The video stream's duration, not the longest stream's.
+void Annotator::check_end() {
+  GstPad* pad = gst_element_get_static_pad(first_, "sink");
+  gint64 duration = -1;
+  if (!gst_pad_peer_query_duration(pad, GST_FORMAT_TIME, &duration)) duration = -1;
+  gst_object_unref(pad);
+  std::lock_guard<std::mutex> lock(damage_lock_);
+  const std::optional<TimestampWatch::Finding> found = watch_.end(duration);
+  if (!found) return;
+  const std::string frames = std::to_string(found->missing) + (found->missing == 1 ? " frame" : " frames");
+  GstStructure* s = gst_structure_new(
+      "lftag-damage", "kind", G_TYPE_STRING, "end", "missing", G_TYPE_INT64, gint64(found->missing), "text",
+      G_TYPE_STRING,
+      ("'" + o_.input + "' ends at " + position_text(found->previous) + ", before the " + position_text(duration) +
+       " its container gives: " + frames + " missing (the file is cut short or its end is damaged)")
+          .c_str(),
+      nullptr);
+  count_damage(s);
+  gst_structure_free(s);
+}
+
+// "2 decoder errors, 1 gap (10 frames missing)", or empty for an intact input.
+std::string Annotator::damage_text() const {
+  std::string text;
+  const auto add = [&text](std::uint64_t n, const char* one, const char* many, const std::string& more = "") {
+    if (n == 0) return;
+    text += (text.empty() ? "" : ", ") + std::to_string(n) + " " + (n == 1 ? one : many) + more;
+  };
+  add(decoder_errors_, "decoder error", "decoder errors");
+  add(gaps_, "timestamp gap", "timestamp gaps",
+      " (" + std::to_string(missing_frames_) + (missing_frames_ == 1 ? " frame" : " frames") + " missing)");
+  add(backwards_, "timestamp out of order", "timestamps out of order");
+  add(cut_frames_, "frame missing at the end", "frames missing at the end");
+  return text;
+}
+
 void Annotator::fail(const std::string& why) {
   if (status_ == 0) {
     status_ = 1;
@@ -466,10 +668,10 @@ bool Annotator::on_message(GstMessage* message) {
       while (!why.empty() && (why.back() == '.' || why.back() == '\n')) why.pop_back();
       const bool from_decoder = GST_MESSAGE_SRC(message) && gst_object_has_as_ancestor(GST_MESSAGE_SRC(message), GST_OBJECT(decode_));
       if (!missing_.empty()) {
+        // What to install first; the stream's caps only after it, with LFTAG_DEBUG.
         std::string what;
         for (const std::string& m : missing_) what += (what.empty() ? "" : ", ") + m;
-        why = "cannot decode '" + o_.input + "': GStreamer has no " + what +
-              ": install gstreamer1.0-libav (most formats), or gstreamer1.0-plugins-bad and gstreamer1.0-plugins-ugly";
+        why = "cannot decode '" + o_.input + "': GStreamer has no " + what + ": " + decoder_hint(missing_caps_);
       } else if (from_decoder || error->domain == GST_STREAM_ERROR) {
         why = "cannot decode '" + o_.input + "': " + why;
       }
@@ -481,9 +683,28 @@ bool Annotator::on_message(GstMessage* message) {
     }
     case GST_MESSAGE_WARNING: {
       GError* error = nullptr;
-      gst_message_parse_warning(message, &error, nullptr);
-      print_line("lftag annotate: warning: " + std::string(error->message));
+      gchar* debug = nullptr;
+      gst_message_parse_warning(message, &error, &debug);
+      const bool from_decoder =
+          GST_MESSAGE_SRC(message) && gst_object_has_as_ancestor(GST_MESSAGE_SRC(message), GST_OBJECT(decode_));
+      const bool no_decoder = g_error_matches(error, GST_STREAM_ERROR, GST_STREAM_ERROR_CODEC_NOT_FOUND) ||
+                              g_error_matches(error, GST_CORE_ERROR, GST_CORE_ERROR_MISSING_PLUGIN);
+      if (no_decoder) {
+        // A stream without a decoder: the error that follows when it is the video says
+        // what to install; another stream (audio) is not used anyway.
+        if (g_getenv("LFTAG_DEBUG")) print_line("lftag annotate: " + std::string(error->message));
+      } else if (from_decoder) {
+        // The demuxer or decoder met damaged data and went on.
+        GstStructure* s = gst_structure_new("lftag-damage", "kind", G_TYPE_STRING, "decoder", "missing", G_TYPE_INT64,
+                                            gint64(0), "text", G_TYPE_STRING,
+                                            ("decoding '" + o_.input + "': " + error->message).c_str(), nullptr);
+        count_damage(s);
+        gst_structure_free(s);
+      } else {
+        print_line("lftag annotate: warning: " + std::string(error->message));
+      }
       g_error_free(error);
+      g_free(debug);
       break;
     }
     case GST_MESSAGE_ELEMENT:
@@ -491,17 +712,26 @@ bool Annotator::on_message(GstMessage* message) {
         gchar* description = gst_missing_plugin_message_get_description(message);
         missing_.push_back(description ? description : "decoder");
         g_free(description);
+        // "gstreamer|1.0|app|description|decoder-CAPS"
+        gchar* detail = gst_missing_plugin_message_get_installer_detail(message);
+        const std::string text = detail ? detail : "";
+        g_free(detail);
+        const std::size_t at = text.rfind("|decoder-");
+        if (at != std::string::npos) missing_caps_.push_back(text.substr(at + 9));
       }
       break;
     case GST_MESSAGE_APPLICATION:
       if (gst_message_has_name(message, "no-more-pads") && !video_linked_)
         fail("'" + o_.input + "' has no video stream");
+      if (gst_message_has_name(message, "lftag-damage")) count_damage(gst_message_get_structure(message));
       break;
     case GST_MESSAGE_EOS:
-      if (!video_linked_)
+      if (!video_linked_) {
         fail("'" + o_.input + "' has no video stream");
-      else
+      } else {
+        check_end();
         g_main_loop_quit(loop_);
+      }
       break;
     default:
       break;
@@ -572,6 +802,8 @@ void Annotator::summary(double seconds) {
     if (shown < rows.size()) std::cerr << " and " << rows.size() - shown << " more";
     std::cerr << "\n";
   }
+  const std::string damage = damage_text();
+  if (!damage.empty()) std::cerr << "  damaged input: " << damage << "\n";
   if (!o_.output.empty())
     std::cerr << "  wrote " << o_.output << " (" << out_.codec->name << " by " << out_.encoder->factory << ")\n";
   if (!o_.jsonl.empty() && o_.jsonl != "-") std::cerr << "  wrote " << o_.jsonl << "\n";
@@ -671,6 +903,12 @@ int Annotator::run() {
     throw;
   }
   summary(seconds);
+  const std::string damage = damage_text();
+  if (o_.strict && !damage.empty()) {
+    // The files are written all the same: every frame that decoded is in them.
+    std::cerr << "lftag annotate: '" << o_.input << "' is damaged (" << damage << "): exit status 3 (--strict)\n";
+    return 3;
+  }
   return 0;
 }
 
@@ -696,6 +934,9 @@ void add_annotate_command(CLI::App& app, int& status) {
                   "What to draw: outline, id and axes, comma-separated, or none (default outline,id, and axes "
                   "too when a camera is given by --calibration or --fx)");
   cmd->add_flag("-q,--quiet", opt->quiet, "No progress and no summary (errors and warnings only)");
+  cmd->add_flag("--strict", opt->strict,
+                "Exit with status 3 when the input is damaged (decoder errors, frames missing, timestamps out "
+                "of order, a file cut short); the outputs are written all the same");
   cmd->callback([opt, tag_size, &status] {
     const Options& o = *opt;
     try {

@@ -7,8 +7,11 @@ Reports each case as TAP.
     examples.py SOURCE_ROOT READ_META_EXECUTABLE WORK_DIR
 """
 import os
+import shutil
+import socket
 import subprocess
 import sys
+import time
 import traceback
 
 import gi
@@ -121,6 +124,43 @@ def score_testsrc():
     assert frames == "40" and wrong == "0" and int(visible) >= 100 and float(rate) >= 95, result.stdout
     assert decoded_frames(path("scored.webm")) == ((640, 480), 40)
     python("score-testsrc.py", "--families", "3x3,10x10", expect=2)
+
+
+@case
+def mqtt_cameras_to_one_broker():
+    # Three simulated cameras publish to one mosquitto; the consumer prints each camera's
+    # markers with a metric pose. Without the broker (Debian: mosquitto) there is nothing
+    # to run.
+    broker = shutil.which("mosquitto") or shutil.which("mosquitto", path="/usr/sbin")
+    if not broker or not shutil.which("mosquitto_sub"):
+        print("# SKIP mqtt_cameras_to_one_broker: mosquitto and mosquitto-clients are not installed")
+        return
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with open(path("mosquitto.conf"), "w") as f:
+        f.write(f"listener {port} 127.0.0.1\nallow_anonymous true\n")
+    process = subprocess.Popen([broker, "-c", path("mosquitto.conf")], stderr=subprocess.DEVNULL)
+    try:
+        for _ in range(600):  # until it listens, up to a minute
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            time.sleep(0.1)
+        address = f"127.0.0.1:{port}"
+        consumer = subprocess.Popen([sys.executable, os.path.join(examples, "mqtt-latest-pose.py"), "--broker",
+                                     address, "--messages", "60"], stdout=subprocess.PIPE, text=True)
+        time.sleep(1)  # subscribed before the cameras start (mosquitto_sub keeps no session)
+        run(os.path.join(examples, "mqtt-cameras.sh"), "3", address,
+            env={"FRAMES": "20", "WIDTH": "640", "HEIGHT": "480"})
+        out, _ = consumer.communicate(timeout=120)
+        assert consumer.returncode == 0, out
+        rows = [line.split() for line in out.splitlines()[1:]]
+        assert sorted({row[0] for row in rows}) == ["cam1", "cam2", "cam3"], out
+        assert len(rows) == 6 and all(row[-1] == "m" for row in rows), out  # two markers each, metric
+    finally:
+        process.terminate()
+        process.wait(timeout=60)
 
 
 print(f"1..{len(CASES)}")

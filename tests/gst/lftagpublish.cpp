@@ -3,7 +3,9 @@
 // JSON as `lftag detect`) and the buffer's timestamps; to a file or the standard output;
 // append; an unwritable location fails the start; which metas survive encoders, decoders
 // and muxers; a warning when there is no meta; a failed write leaves whole lines only and
-// says which frame is lost; a file deleted, moved or replaced while written is an error.
+// says which frame is lost; a file deleted, moved or replaced while written is an error;
+// at EOS, when stopped mid-stream and after an error downstream every frame received is
+// in the file, whole, and the file is closed.
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -620,6 +622,226 @@ GST_START_TEST(test_times_in_a_segment_not_from_zero) {
 }
 GST_END_TEST;
 
+// Whether this process still has `path` open.
+bool open_here(const std::string& path) {
+  bool found = false;
+  if (GDir* dir = g_dir_open("/proc/self/fd", 0, nullptr)) {
+    while (const gchar* name = g_dir_read_name(dir)) {
+      gchar* link = g_file_read_link((std::string("/proc/self/fd/") + name).c_str(), nullptr);
+      if (link && path == link) found = true;
+      g_free(link);
+    }
+    g_dir_close(dir);
+  }
+  return found;
+}
+
+// The buffers that reached lftagpublish, counted on its sink pad; after `error_at` (when
+// not negative) its source pad fails the stream as a downstream error would.
+struct Received {
+  GMutex lock;
+  GCond changed;
+  int count = 0;
+  int error_at = -1;
+  Received() {
+    g_mutex_init(&lock);
+    g_cond_init(&changed);
+  }
+  ~Received() {
+    g_cond_clear(&changed);
+    g_mutex_clear(&lock);
+  }
+  // Waits (up to a minute) until `n` buffers came.
+  bool wait_for(int n) {
+    const gint64 end = g_get_monotonic_time() + 60 * G_TIME_SPAN_SECOND;
+    g_mutex_lock(&lock);
+    while (count < n && g_cond_wait_until(&changed, &lock, end)) {
+    }
+    const bool came = count >= n;
+    g_mutex_unlock(&lock);
+    return came;
+  }
+  int seen() {
+    g_mutex_lock(&lock);
+    const int n = count;
+    g_mutex_unlock(&lock);
+    return n;
+  }
+};
+
+void watch_publisher(GstElement* pipeline, Received& received) {
+  GstElement* publish = gst_bin_get_by_name(GST_BIN(pipeline), "p");
+  GstPad* sink = gst_element_get_static_pad(publish, "sink");
+  gst_pad_add_probe(
+      sink, GST_PAD_PROBE_TYPE_BUFFER,
+      [](GstPad*, GstPadProbeInfo*, gpointer data) {
+        auto* r = static_cast<Received*>(data);
+        g_mutex_lock(&r->lock);
+        ++r->count;
+        g_cond_broadcast(&r->changed);
+        g_mutex_unlock(&r->lock);
+        return GST_PAD_PROBE_OK;
+      },
+      &received, nullptr);
+  gst_object_unref(sink);
+  GstPad* src = gst_element_get_static_pad(publish, "src");
+  gst_pad_add_probe(
+      src, GST_PAD_PROBE_TYPE_BUFFER,
+      [](GstPad*, GstPadProbeInfo* info, gpointer data) {
+        auto* r = static_cast<Received*>(data);
+        if (r->error_at < 0 || r->seen() <= r->error_at) return GST_PAD_PROBE_OK;
+        gst_buffer_unref(GST_PAD_PROBE_INFO_BUFFER(info));
+        GST_PAD_PROBE_INFO_DATA(info) = nullptr;
+        GST_PAD_PROBE_INFO_FLOW_RETURN(info) = GST_FLOW_ERROR;
+        return GST_PAD_PROBE_HANDLED;
+      },
+      &received, nullptr);
+  gst_object_unref(src);
+  gst_object_unref(publish);
+}
+
+// The file holds `n` whole lines, frames 0 to n - 1 in order, and nothing else.
+void expect_whole_lines(const std::string& path, int n, const char* when) {
+  const std::vector<std::string> lines = raw_lines(path);
+  fail_unless_equals_int(lines.size(), n);
+  for (int i = 0; i < n; ++i) {
+    fail_unless(!lines[i].empty() && lines[i].back() == '\n', "%s: line %d is cut: %s", when, i, lines[i].c_str());
+    fail_unless_equals_int(nlohmann::json::parse(lines[i]).at("frame").get<int>(), i);
+  }
+}
+
+// At EOS every frame received is in the file, whole, before the pipeline stops; once
+// stopped the file is closed.
+GST_START_TEST(test_every_frame_at_eos) {
+  const ScratchDir scratch;
+  const std::string path = scratch.path("eos.jsonl");
+  GstElement* pipeline = gst_parse_launch(
+      ("lftagtestsrc num-buffers=25 ids=6789 ! lftagdetect ! lftagpublish name=p location=" + path + " ! fakesink")
+          .c_str(),
+      nullptr);
+  Received received;
+  watch_publisher(pipeline, received);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+  GstMessage* m =
+      gst_bus_timed_pop_filtered(bus, 120 * GST_SECOND, GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR));
+  fail_unless(m != nullptr && GST_MESSAGE_TYPE(m) == GST_MESSAGE_EOS);
+  gst_message_unref(m);
+  fail_unless_equals_int(received.seen(), 25);
+  expect_whole_lines(path, 25, "at EOS");
+  fail_unless(open_here(path));
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  fail_unless(!open_here(path), "still open after NULL");
+  expect_whole_lines(path, 25, "after NULL");
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+}
+GST_END_TEST;
+
+// Set to NULL (or READY) while a live stream flows, without EOS: every frame that reached
+// the element is in the file, whole, and the file is closed.
+GST_START_TEST(test_every_frame_when_stopped_mid_stream) {
+  for (const GstState target : {GST_STATE_NULL, GST_STATE_READY}) {
+    const ScratchDir scratch;
+    const std::string path = scratch.path("stopped.jsonl");
+    GstElement* pipeline = gst_parse_launch(("lftagtestsrc is-live=true ids=6789 ! lftagdetect ! lftagpublish "
+                                             "name=p location=" + path + " ! fakesink sync=true")
+                                                .c_str(),
+                                            nullptr);
+    Received received;
+    watch_publisher(pipeline, received);
+    fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+    fail_unless(received.wait_for(10), "10 frames did not come in a minute");
+    fail_unless(gst_element_set_state(pipeline, target) == GST_STATE_CHANGE_SUCCESS);
+    const int n = received.seen();
+    fail_unless(!open_here(path), "still open after %s", gst_element_state_get_name(target));
+    expect_whole_lines(path, n, gst_element_state_get_name(target));
+    gst_element_set_state(pipeline, GST_STATE_NULL);
+    gst_object_unref(pipeline);
+  }
+}
+GST_END_TEST;
+
+// An error downstream stops the stream: the frame it happened on and every one before
+// are in the file, whole, when the application stops the pipeline.
+GST_START_TEST(test_every_frame_after_an_error_downstream) {
+  const ScratchDir scratch;
+  const std::string path = scratch.path("error.jsonl");
+  GstElement* pipeline = gst_parse_launch(
+      ("lftagtestsrc ids=6789 ! lftagdetect ! lftagpublish name=p location=" + path + " ! fakesink").c_str(),
+      nullptr);
+  Received received;
+  received.error_at = 7;
+  watch_publisher(pipeline, received);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
+  GstMessage* m =
+      gst_bus_timed_pop_filtered(bus, 120 * GST_SECOND, GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR));
+  fail_unless(m != nullptr && GST_MESSAGE_TYPE(m) == GST_MESSAGE_ERROR, "the stream did not fail");
+  // The source's "Internal data stream error", not lftagpublish's.
+  fail_unless(std::string(GST_OBJECT_NAME(GST_MESSAGE_SRC(m))) != "p");
+  gst_message_unref(m);
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  fail_unless_equals_int(received.seen(), 8);
+  fail_unless(!open_here(path));
+  expect_whole_lines(path, 8, "after the error");
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+}
+GST_END_TEST;
+
+// frame-numbers=stream-time numbers each frame by its stream time and the caps' frame
+// rate, so that after frames are lost the numbers are still the file's frame indices; the
+// default counts buffers.
+GST_START_TEST(test_frame_numbers_by_stream_time) {
+  for (const char* numbers : {"count", "stream-time"}) {
+    const ScratchDir scratch;
+    const std::string path = scratch.path("numbers.jsonl");
+    GstHarness* h =
+        gst_harness_new_parse(("lftagpublish frame-numbers=" + std::string(numbers) + " location=" + path).c_str());
+    gst_harness_set_src_caps_str(h, "video/x-raw,format=GRAY8,width=32,height=24,framerate=25/1");
+    // Frames 10 to 14 missing; the segment starts at 1 s of pts, so stream time is pts - 1 s.
+    GstSegment segment;
+    gst_segment_init(&segment, GST_FORMAT_TIME);
+    segment.start = segment.position = GST_SECOND;
+    fail_unless(gst_harness_push_event(h, gst_event_new_segment(&segment)));
+    const std::vector<int> frames = {0, 1, 9, 15, 16};
+    for (const int frame : frames) {
+      GstBuffer* buffer = gst_buffer_new_allocate(nullptr, 32 * 24, nullptr);
+      GST_BUFFER_PTS(buffer) = GST_SECOND + gst_util_uint64_scale(frame, GST_SECOND, 25) + 3 * GST_MSECOND;
+      lftag::gst::add_detection_meta(buffer, 32, 24, {});
+      fail_unless_equals_int(gst_harness_push(h, buffer), GST_FLOW_OK);
+      gst_buffer_unref(gst_harness_pull(h));
+    }
+    gst_harness_teardown(h);
+    const std::vector<nlohmann::json> lines = read_lines(path);
+    fail_unless_equals_int(lines.size(), frames.size());
+    const bool by_time = std::string(numbers) == "stream-time";
+    for (std::size_t i = 0; i < lines.size(); ++i)
+      fail_unless_equals_int(lines[i].at("frame").get<int>(), by_time ? frames[i] : int(i));
+  }
+}
+GST_END_TEST;
+
+#if !LFTAG_HAVE_MQTT
+// A build without libmosquitto: target=mqtt fails the start, saying what to install.
+GST_START_TEST(test_mqtt_needs_libmosquitto) {
+  GstElement* pipeline =
+      gst_parse_launch("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ! fakesink", nullptr);
+  GstBus* bus = gst_element_get_bus(pipeline);
+  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) == GST_STATE_CHANGE_FAILURE);
+  const Posted error = parse_error(gst_bus_pop_filtered(bus, GST_MESSAGE_ERROR));
+  gst_element_set_state(pipeline, GST_STATE_NULL);
+  gst_object_unref(bus);
+  gst_object_unref(pipeline);
+  fail_unless_equals_string(error.source.c_str(), "p");
+  fail_unless(has(error.message, "without MQTT") && has(error.message, "libmosquitto-dev") &&
+                  has(error.message, "target=file"),
+              "%s", error.message.c_str());
+}
+GST_END_TEST;
+#endif
+
 static Suite* lftagpublish_suite(void) {
   Suite* s = suite_create("lftagpublish");
   TCase* tc = tcase_create("general");
@@ -637,6 +859,13 @@ static Suite* lftagpublish_suite(void) {
   tcase_add_test(tc, test_no_space_left);
   tcase_add_test(tc, test_directory_removed);
   tcase_add_test(tc, test_file_replaced_or_moved);
+  tcase_add_test(tc, test_frame_numbers_by_stream_time);
+  tcase_add_test(tc, test_every_frame_at_eos);
+  tcase_add_test(tc, test_every_frame_when_stopped_mid_stream);
+  tcase_add_test(tc, test_every_frame_after_an_error_downstream);
+#if !LFTAG_HAVE_MQTT
+  tcase_add_test(tc, test_mqtt_needs_libmosquitto);
+#endif
   return s;
 }
 
