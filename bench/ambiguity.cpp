@@ -12,7 +12,8 @@
 // its choice rules on the same frames: `default`, `centroids` (shape_choice_ratio 0) and
 // `shapes` (the squares' foreshortening whenever there are two solutions), so that the
 // ratio below which the shapes decide can be chosen from one run. The trials are split
-// into a tuning set and a validation set with other poses and marker ids.
+// into a tuning set and a validation set with other poses and marker ids. A wrong choice
+// more than kFlip off is a flip: what makes the z axis jump.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -32,6 +33,9 @@ namespace {
 
 constexpr double kTagSize = 0.1;  // metres; only the poses' scale depends on it
 constexpr double kMargin = 1;     // degrees the other solution must be nearer for a wrong choice
+constexpr double kFlip = 10;      // degrees off beyond which a wrong choice is also counted as a flip
+// The ambiguity ratios' bins of ambiguity_ratios.csv: where a system's ratio says its choice is safe.
+const std::vector<double> kRatioBins{0, 1.1, 1.5, 2, 3};
 const char* const kSets[2] = {"tuning", "validation"};
 
 struct Plan {
@@ -133,20 +137,29 @@ bool run_ambiguity(const Options& options) {
                   "rotation_error_deg", "alternative_rotation_error_deg", "ambiguity_ratio", "wrong_choice"});
   Csv summary_csv(options.out / "ambiguity_summary.csv",
                   {"system", "rule", "set", "size_px", "tilt_deg", "markers", "found", "with_alternative", "wrong",
-                   "wrong_pct", "median_rotation_deg", "p90_rotation_deg", "wrong_ratio_max"});
+                   "wrong_pct", "flips", "flips_pct", "median_rotation_deg", "p90_rotation_deg", "wrong_ratio_max"});
+  Csv ratios_csv(options.out / "ambiguity_ratios.csv",
+                 {"system", "rule", "set", "ratio_from", "ratio_to", "found", "wrong", "flips"});
   for (int s = 0; s < n; ++s) {
     for (std::size_t r = 0; r < rule_names[s].size(); ++r) {
       // Cells of size x tilt, then each size over all tilts, each tilt over all sizes, and
       // everything (NaN stands for "all").
       struct Tally {
-        int markers = 0, found = 0, with_alternative = 0, wrong = 0;
+        int markers = 0, found = 0, with_alternative = 0, wrong = 0, flips = 0;
         double wrong_ratio_max = kNaN;
         std::vector<double> rotation;
       };
       std::map<std::tuple<int, int, int>, Tally> tallies;  // set, size, tilt (-1: all)
+      std::map<std::pair<int, std::size_t>, Tally> by_ratio;  // set, ratio bin
       for (const Trial& t : trials[s]) {
         const Outcome& o = t.outcomes[r];
-        const bool wrong = wrong_choice(o);
+        const bool wrong = wrong_choice(o), flip = wrong && o.rotation_error_deg > kFlip;
+        if (o.found && std::isfinite(o.ambiguity_ratio)) {
+          std::size_t bin = 0;
+          while (bin + 1 < kRatioBins.size() && o.ambiguity_ratio >= kRatioBins[bin + 1]) ++bin;
+          Tally& y = by_ratio[{t.set, bin}];
+          ++y.found, y.wrong += wrong, y.flips += flip;
+        }
         trials_csv.row(options.systems[s], rule_names[s][r], kSets[t.set], p.sizes[t.size], p.tilts[t.tilt], t.marker,
                        t.id, t.edge_px, t.tilt_deg, int(o.found), o.rotation_error_deg,
                        o.alternative_rotation_error_deg, o.ambiguity_ratio, int(wrong));
@@ -160,6 +173,7 @@ bool run_ambiguity(const Options& options) {
           y.with_alternative += std::isfinite(o.alternative_rotation_error_deg);
           if (wrong) {
             ++y.wrong;
+            y.flips += flip;
             if (!(y.wrong_ratio_max >= o.ambiguity_ratio)) y.wrong_ratio_max = o.ambiguity_ratio;
           }
         }
@@ -168,8 +182,13 @@ bool run_ambiguity(const Options& options) {
         const auto [set, size, tilt] = key;
         summary_csv.row(options.systems[s], rule_names[s][r], kSets[set], size < 0 ? kNaN : p.sizes[size],
                         tilt < 0 ? kNaN : p.tilts[tilt], y.markers, y.found, y.with_alternative, y.wrong,
-                        y.found ? 100.0 * y.wrong / y.found : kNaN, quantile(y.rotation, 0.5),
-                        quantile(y.rotation, 0.9), y.wrong_ratio_max);
+                        y.found ? 100.0 * y.wrong / y.found : kNaN, y.flips, y.found ? 100.0 * y.flips / y.found : kNaN,
+                        quantile(y.rotation, 0.5), quantile(y.rotation, 0.9), y.wrong_ratio_max);
+      }
+      for (const auto& [key, y] : by_ratio) {
+        const double to = key.second + 1 < kRatioBins.size() ? kRatioBins[key.second + 1] : kNaN;
+        ratios_csv.row(options.systems[s], rule_names[s][r], kSets[key.first], kRatioBins[key.second], to, y.found,
+                       y.wrong, y.flips);
       }
     }
   }
