@@ -64,7 +64,8 @@
  * a far or blurred marker; decode-error and worst-cell are then 0), and the
  * planar pose's other solution: "alternative-rvec", "alternative-tvec",
  * "alternative-reprojection-error" and "ambiguity-ratio" (the latter over
- * reprojection-error: near 1 the pose may be the flip). A point is an array of
+ * reprojection-error: under about 2 the pose may be the flip, from 3 it is
+ * settled; see the README's Poses). A point is an array of
  * two doubles, in pixels with pixel centres at integers.
  *
  * Poses need the camera: #GstLFTagDetect:calibration-file (OpenCV YAML, XML or

@@ -235,7 +235,8 @@ TEST(Pose, BothSolutionsOfATiltedMarkerAndWhichFitsBetter) {
 TEST(Pose, ASmallMarkerSeenFaceOnIsAmbiguous) {
   // 3x3 and 4x4 markers of 24 to 30 px, 3 to 4 degrees off face on: the flip fits the
   // centroids almost as well (ratios of 1.13, 2.63 and 1.006 here), which the ratio says;
-  // the one chosen fits best, and where the tilt shows (4 degrees) it is the true one.
+  // the one chosen is within 1.5 degrees of the truth, and where the tilt shows (4
+  // degrees) the other is not.
   struct Small {
     Case c;
     bool flip_shows;
@@ -247,9 +248,12 @@ TEST(Pose, ASmallMarkerSeenFaceOnIsAmbiguous) {
     ASSERT_TRUE(p) << what;
     Detection det;
     ASSERT_TRUE(detail::estimate_pose(p->candidate, p->decoding, p->camera, pose_params(p->marker.tag_size), det));
-    EXPECT_GE(det.ambiguity_ratio, 1) << what;
+    // Under 1 only where the squares' inks chose, within the shape choice ratio (1.006
+    // here: the inks chose the other, 0.994).
+    const double shapes = DetectorParams{}.shape_choice_ratio;
+    EXPECT_GT(det.ambiguity_ratio, 1 / shapes) << what;
     EXPECT_LT(det.ambiguity_ratio, 3) << what;
-    EXPECT_GE(det.alternative_reprojection_error, det.reprojection_error) << what;
+    EXPECT_GT(det.alternative_reprojection_error, det.reprojection_error / shapes) << what;
     EXPECT_LT(rotation_error_deg(det.rvec, p->marker.rvec), 1.5) << what;
     if (s.flip_shows) {
       EXPECT_GT(rotation_error_deg(det.alternative_rvec, p->marker.rvec), 4) << what;
