@@ -12,14 +12,18 @@
 // its choice rules on the same frames: `default`, `centroids` (shape_choice_ratio 0) and
 // `shapes` (the squares' foreshortening whenever there are two solutions), so that the
 // ratio below which the shapes decide can be chosen from one run. The trials are split
-// into a tuning set and a validation set with other poses and marker ids. A wrong choice
+// into a tuning set and a validation set with other poses and marker ids, and each frame
+// is seen clean and as a webcam would give it (kConditions). A wrong choice
 // more than kFlip off is a flip: what makes the z axis jump.
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <memory>
+#include <iterator>
 #include <tuple>
+
+#include <opencv2/imgproc.hpp>
 
 #include "apriltag_system.hpp"
 #include "csv.hpp"
@@ -37,6 +41,14 @@ constexpr double kFlip = 10;      // degrees off beyond which a wrong choice is 
 // The ambiguity ratios' bins of ambiguity_ratios.csv: where a system's ratio says its choice is safe.
 const std::vector<double> kRatioBins{0, 1.1, 1.5, 2, 3};
 const char* const kSets[2] = {"tuning", "validation"};
+// Each frame as rendered (sharp, noise-free) and as a webcam gives it: a defocus of
+// 0.7 px (Gaussian sigma) and sensor noise of 3 grey levels.
+struct Condition {
+  const char* name;
+  double defocus_px, noise;
+};
+const Condition kConditions[] = {{"clean", 0, 0}, {"webcam", 0.7, 3}};
+constexpr int kConditionCount = int(std::size(kConditions));
 
 struct Plan {
   int markers;  // per size, tilt and set
@@ -87,7 +99,7 @@ bool wrong_choice(const Outcome& o) {
 }
 
 struct Trial {
-  int set, size, tilt, marker;
+  int condition, set, size, tilt, marker;
   std::string id;
   double edge_px, tilt_deg;  // as placed
   std::vector<Outcome> outcomes;  // per rule
@@ -100,6 +112,11 @@ bool run_ambiguity(const Options& options) {
   lftag::SceneParams params;
   params.camera = camera();
   const lftag::SceneRenderer renderer(params);
+  std::vector<lftag::SceneRenderer> noisy;  // per condition: its noise
+  for (const Condition& c : kConditions) {
+    params.noise_sigma = c.noise;
+    noisy.emplace_back(params);
+  }
   const int n = int(options.systems.size());
   std::vector<std::vector<std::string>> rule_names(n);
   std::vector<std::vector<Trial>> trials(n);
@@ -121,25 +138,34 @@ bool run_ambiguity(const Options& options) {
             const cv::Point2d center(uniform(edge, 639 - edge), uniform(edge, 479 - edge));
             const Pose pose = facing_pose(renderer.params().camera, center, edge, p.tilts[t], uniform(0, 360),
                                           uniform(0, 360), kTagSize);
-            Trial trial{set, int(a), int(t), m, ids[std::size_t(set * p.markers + m)],
-                        edge_px(renderer.params().camera, pose, kTagSize), tilt_from_sight_deg(pose), {}};
-            const cv::Mat1b image = renderer.render({design.target(trial.id, kTagSize, pose.rvec, pose.tvec)});
-            for (Rule& r : rules)
-              trial.outcomes.push_back(
-                  score(r.system->detect(image), trial.id, pose, kTagSize, renderer.params().camera));
-            trials[s].push_back(std::move(trial));
+            const std::string& id = ids[std::size_t(set * p.markers + m)];
+            const cv::Mat1f linear = renderer.render_linear({design.target(id, kTagSize, pose.rvec, pose.tvec)});
+            for (int c = 0; c < kConditionCount; ++c) {
+              Trial trial{c, set, int(a), int(t), m, id, edge_px(renderer.params().camera, pose, kTagSize),
+                          tilt_from_sight_deg(pose), {}};
+              cv::Mat1f defocused = linear;
+              if (kConditions[c].defocus_px > 0)
+                cv::GaussianBlur(linear, defocused, cv::Size(), kConditions[c].defocus_px);
+              const cv::Mat1b image = noisy[c].quantize(defocused, rng());
+              for (Rule& r : rules)
+                trial.outcomes.push_back(
+                    score(r.system->detect(image), id, pose, kTagSize, renderer.params().camera));
+              trials[s].push_back(std::move(trial));
+            }
           }
     progress("ambiguity: " + options.systems[s] + " done");
   });
 
   Csv trials_csv(options.out / "ambiguity.csv",
-                 {"system", "rule", "set", "size_px", "tilt_deg", "marker", "id", "edge_px", "tilt_placed_deg", "found",
+                 {"system", "rule", "condition", "set", "size_px", "tilt_deg", "marker", "id", "edge_px",
+                  "tilt_placed_deg", "found",
                   "rotation_error_deg", "alternative_rotation_error_deg", "ambiguity_ratio", "wrong_choice"});
   Csv summary_csv(options.out / "ambiguity_summary.csv",
-                  {"system", "rule", "set", "size_px", "tilt_deg", "markers", "found", "with_alternative", "wrong",
+                  {"system", "rule", "condition", "set", "size_px", "tilt_deg", "markers", "found", "with_alternative",
+                   "wrong",
                    "wrong_pct", "flips", "flips_pct", "median_rotation_deg", "p90_rotation_deg", "wrong_ratio_max"});
   Csv ratios_csv(options.out / "ambiguity_ratios.csv",
-                 {"system", "rule", "set", "ratio_from", "ratio_to", "found", "wrong", "flips"});
+                 {"system", "rule", "condition", "set", "ratio_from", "ratio_to", "found", "wrong", "flips"});
   for (int s = 0; s < n; ++s) {
     for (std::size_t r = 0; r < rule_names[s].size(); ++r) {
       // Cells of size x tilt, then each size over all tilts, each tilt over all sizes, and
@@ -149,22 +175,23 @@ bool run_ambiguity(const Options& options) {
         double wrong_ratio_max = kNaN;
         std::vector<double> rotation;
       };
-      std::map<std::tuple<int, int, int>, Tally> tallies;  // set, size, tilt (-1: all)
-      std::map<std::pair<int, std::size_t>, Tally> by_ratio;  // set, ratio bin
+      std::map<std::tuple<int, int, int, int>, Tally> tallies;  // condition, set, size, tilt (-1: all)
+      std::map<std::tuple<int, int, std::size_t>, Tally> by_ratio;  // condition, set, ratio bin
       for (const Trial& t : trials[s]) {
         const Outcome& o = t.outcomes[r];
         const bool wrong = wrong_choice(o), flip = wrong && o.rotation_error_deg > kFlip;
         if (o.found && std::isfinite(o.ambiguity_ratio)) {
           std::size_t bin = 0;
           while (bin + 1 < kRatioBins.size() && o.ambiguity_ratio >= kRatioBins[bin + 1]) ++bin;
-          Tally& y = by_ratio[{t.set, bin}];
+          Tally& y = by_ratio[{t.condition, t.set, bin}];
           ++y.found, y.wrong += wrong, y.flips += flip;
         }
-        trials_csv.row(options.systems[s], rule_names[s][r], kSets[t.set], p.sizes[t.size], p.tilts[t.tilt], t.marker,
-                       t.id, t.edge_px, t.tilt_deg, int(o.found), o.rotation_error_deg,
-                       o.alternative_rotation_error_deg, o.ambiguity_ratio, int(wrong));
-        for (const auto& key : {std::make_tuple(t.set, t.size, t.tilt), std::make_tuple(t.set, t.size, -1),
-                                std::make_tuple(t.set, -1, t.tilt), std::make_tuple(t.set, -1, -1)}) {
+        trials_csv.row(options.systems[s], rule_names[s][r], kConditions[t.condition].name, kSets[t.set],
+                       p.sizes[t.size], p.tilts[t.tilt], t.marker, t.id, t.edge_px, t.tilt_deg, int(o.found),
+                       o.rotation_error_deg, o.alternative_rotation_error_deg, o.ambiguity_ratio, int(wrong));
+        const int c = t.condition;
+        for (const auto& key : {std::make_tuple(c, t.set, t.size, t.tilt), std::make_tuple(c, t.set, t.size, -1),
+                                std::make_tuple(c, t.set, -1, t.tilt), std::make_tuple(c, t.set, -1, -1)}) {
           Tally& y = tallies[key];
           ++y.markers;
           if (!o.found || !std::isfinite(o.rotation_error_deg)) continue;
@@ -179,16 +206,18 @@ bool run_ambiguity(const Options& options) {
         }
       }
       for (const auto& [key, y] : tallies) {
-        const auto [set, size, tilt] = key;
-        summary_csv.row(options.systems[s], rule_names[s][r], kSets[set], size < 0 ? kNaN : p.sizes[size],
+        const auto [condition, set, size, tilt] = key;
+        summary_csv.row(options.systems[s], rule_names[s][r], kConditions[condition].name, kSets[set],
+                        size < 0 ? kNaN : p.sizes[size],
                         tilt < 0 ? kNaN : p.tilts[tilt], y.markers, y.found, y.with_alternative, y.wrong,
                         y.found ? 100.0 * y.wrong / y.found : kNaN, y.flips, y.found ? 100.0 * y.flips / y.found : kNaN,
                         quantile(y.rotation, 0.5), quantile(y.rotation, 0.9), y.wrong_ratio_max);
       }
       for (const auto& [key, y] : by_ratio) {
-        const double to = key.second + 1 < kRatioBins.size() ? kRatioBins[key.second + 1] : kNaN;
-        ratios_csv.row(options.systems[s], rule_names[s][r], kSets[key.first], kRatioBins[key.second], to, y.found,
-                       y.wrong, y.flips);
+        const auto [condition, set, bin] = key;
+        const double to = bin + 1 < kRatioBins.size() ? kRatioBins[bin + 1] : kNaN;
+        ratios_csv.row(options.systems[s], rule_names[s][r], kConditions[condition].name, kSets[set], kRatioBins[bin],
+                       to, y.found, y.wrong, y.flips);
       }
     }
   }

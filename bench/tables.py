@@ -88,13 +88,13 @@ AMBIGUITY_RULES = [("lftag-3x3", "default"), ("lftag-3x3", "centroids"), ("lftag
                    ("apriltag-36h11-d2", "ippe-corners"), ("apriltag-36h11-d2", "estimate-tag-pose")]
 
 
-def ambiguity_table(results, by, column="wrong_pct"):
+def ambiguity_table(results, by, column="wrong_pct", condition="clean"):
     """`column` (wrong choices or flips, % of the markers found), tuning / validation, by size or by tilt."""
     other = "tilt_deg" if by == "size_px" else "size_px"
     cells = defaultdict(dict)
     steps = []
     for r in read(results, "ambiguity_summary.csv"):
-        if r[other] or not r[by]:
+        if r[other] or not r[by] or r["condition"] != condition:
             continue
         step = f"{float(r[by]):g}"
         if step not in steps:
@@ -111,23 +111,25 @@ def ambiguity_table(results, by, column="wrong_pct"):
     return table(["system, rule"] + [st + unit for st in steps], rows)
 
 
-def ambiguity_size_table(results):
-    return ambiguity_table(results, "size_px")
+def ambiguity_size_table(results, condition="clean"):
+    return ambiguity_table(results, "size_px", condition=condition)
 
 
-def ambiguity_tilt_table(results):
-    return ambiguity_table(results, "tilt_deg")
+def ambiguity_tilt_table(results, condition="clean"):
+    return ambiguity_table(results, "tilt_deg", condition=condition)
 
 
-def ambiguity_flips_table(results):
-    return ambiguity_table(results, "size_px", "flips_pct")
+def ambiguity_flips_table(results, condition="clean"):
+    return ambiguity_table(results, "size_px", "flips_pct", condition)
 
 
-def ambiguity_ratio_table(results):
+def ambiguity_ratio_table(results, condition="clean"):
     """Both sets: the wrong choices (and flips) among the markers found, by the system's ratio."""
     counts = defaultdict(lambda: defaultdict(lambda: [0, 0, 0]))
     bins = []
     for r in read(results, "ambiguity_ratios.csv"):
+        if r["condition"] != condition:
+            continue
         b = (float(r["ratio_from"]), float(r["ratio_to"]) if r["ratio_to"] else None)
         if b not in bins:
             bins.append(b)
@@ -361,6 +363,10 @@ def main(results):
                         ("Wrong pose choices more than 10 deg off, by size (% of found; tuning / validation)",
                          ambiguity_flips_table),
                         ("Wrong pose choices by ambiguity ratio (both sets)", ambiguity_ratio_table),
+                        ("Webcam: wrong pose choices by size", lambda r: ambiguity_size_table(r, "webcam")),
+                        ("Webcam: wrong pose choices by tilt", lambda r: ambiguity_tilt_table(r, "webcam")),
+                        ("Webcam: flips by size", lambda r: ambiguity_flips_table(r, "webcam")),
+                        ("Webcam: wrong pose choices by ambiguity ratio", lambda r: ambiguity_ratio_table(r, "webcam")),
                         ("False positives", fp_table), ("Funnel", funnel_table), ("Speed", speed_table),
                         ("Stages", stage_table), ("Throughput", throughput_table), ("Video", video_table),
                         ("Video recall by projected edge and tilt", video_bins_table),
