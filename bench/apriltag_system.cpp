@@ -1,9 +1,15 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 #include "apriltag_system.hpp"
 
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
 #include <stdexcept>
 
+#include <opencv2/calib3d.hpp>
+
 #include <apriltag/apriltag.h>
+#include <apriltag/apriltag_pose.h>
 #include <apriltag/common/image_u8.h>
 #include <apriltag/common/zarray.h>
 #include <apriltag/tag16h5.h>
@@ -11,9 +17,12 @@
 #include <apriltag/tag36h11.h>
 #include <apriltag/tagStandard41h12.h>
 
+#include "trial.hpp"  // rotation_error_deg
+
 namespace bench {
 
-AprilTagSystem::AprilTagSystem(const std::string& family, int decimate) : short_name_(family), decimate_(decimate) {
+AprilTagSystem::AprilTagSystem(const std::string& family, int decimate, PoseMethod pose)
+    : short_name_(family), decimate_(decimate), pose_method_(pose) {
   if (family == "16h5") family_ = tag16h5_create(), destroy_family_ = tag16h5_destroy;
   else if (family == "25h9") family_ = tag25h9_create(), destroy_family_ = tag25h9_destroy;
   else if (family == "36h11") family_ = tag36h11_create(), destroy_family_ = tag36h11_destroy;
@@ -60,6 +69,33 @@ void AprilTagSystem::set_camera(const lftag::Camera& camera, double tag_size) {
   quad_size_ = tag_size * family_->width_at_border / extent;
 }
 
+// The library's pose (estimate_tag_pose) in its own pixel convention (centres at +0.5);
+// its frame is SPEC 2's (x right, y down, z into the tag). Debian's library exports only
+// that function, which returns one of its two local minima, so the other solution is the
+// one of IPPE's two on the same corners farther from it.
+void AprilTagSystem::set_library_pose(apriltag_detection* d, Detected& det) const {
+  if (camera_.has_distortion()) throw std::invalid_argument("AprilTag's own pose needs an undistorted camera");
+  apriltag_detection_info_t info{d, quad_size_, camera_.fx, camera_.fy, camera_.cx + 0.5, camera_.cy + 0.5};
+  apriltag_pose_t p{nullptr, nullptr};
+  estimate_tag_pose(&info, &p);
+  if (!p.R || !p.t) return;
+  cv::Matx33d r;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) r(i, j) = MATD_EL(p.R, i, j);
+  Pose pose;
+  cv::Rodrigues(r, pose.rvec);
+  pose.tvec = {MATD_EL(p.t, 0, 0), MATD_EL(p.t, 1, 0), MATD_EL(p.t, 2, 0)};
+  // matd_destroy is not exported either; a matd_t is one calloc'd block (common/matd.c).
+  std::free(p.R), std::free(p.t);
+  det.pose = pose;
+  Detected ippe = det;
+  set_square_pose(ippe, quad_size_, camera_);
+  if (!ippe.pose || !ippe.alternative) return;
+  det.alternative = rotation_error_deg(ippe.pose->rvec, pose.rvec) > rotation_error_deg(ippe.alternative->rvec, pose.rvec)
+                        ? ippe.pose
+                        : ippe.alternative;
+}
+
 std::vector<Detected> AprilTagSystem::detect(const cv::Mat1b& grey) {
   image_u8_t im{grey.cols, grey.rows, int(grey.step[0]), const_cast<uint8_t*>(grey.ptr<uint8_t>())};
   zarray_t* found = apriltag_detector_detect(detector_, &im);
@@ -75,7 +111,8 @@ std::vector<Detected> AprilTagSystem::detect(const cv::Mat1b& grey) {
     // bottom-left; convert to OpenCV's convention, clockwise from the top-left.
     for (int k : {3, 2, 1, 0}) det.points.emplace_back(d->p[k][0] - 0.5, d->p[k][1] - 0.5);
     det.center = cv::Point2d(d->c[0] - 0.5, d->c[1] - 0.5);
-    det.pose = square_pose(det.points, quad_size_, camera_);
+    if (pose_method_ == PoseMethod::ippe_square) set_square_pose(det, quad_size_, camera_);
+    else set_library_pose(d, det);
     out.push_back(std::move(det));
   }
   apriltag_detections_destroy(found);

@@ -39,7 +39,7 @@ std::vector<Detected> ArucoSystem::detect(const cv::Mat1b& grey) {
     // ArUco lists the outer corners clockwise from the marker's top-left.
     for (const cv::Point2f& p : corners[i]) det.points.emplace_back(p.x, p.y);
     det.center = quad_center(det.points);
-    det.pose = square_pose(det.points, tag_size_, camera_);
+    set_square_pose(det, tag_size_, camera_);
     out.push_back(std::move(det));
   }
   return out;

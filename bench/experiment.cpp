@@ -18,6 +18,8 @@ const std::vector<Experiment>& experiments() {
       {"angle", "first-missed grazing angle at a fixed distance", run_angle},
       {"blur", "largest linear motion blur with every marker found, per blur angle", run_blur},
       {"pose", "rotation and translation error against distance and tilt", run_pose},
+      {"ambiguity", "how often the planar pose's flip is chosen, by marker size and tilt, tuning and validation sets",
+       run_ambiguity},
       {"fp", "false positives on marker-free real images (opencv-doc)", run_false_positives},
       {"video", "recall and pose error of moving markers composited into real video (1280x720, JPEG)", run_video},
       {"speed", "median time per 1280x720 and 1920x1080 frame, one thread", run_speed},

@@ -37,6 +37,7 @@ bool run_range(const Options& options);
 bool run_angle(const Options& options);
 bool run_blur(const Options& options);
 bool run_pose(const Options& options);
+bool run_ambiguity(const Options& options);
 bool run_false_positives(const Options& options);
 bool run_video(const Options& options);
 bool run_speed(const Options& options);

@@ -23,7 +23,7 @@ cv::Mat1b LftagSystem::marker_cells(const std::string& id) const {
 }
 
 void LftagSystem::set_camera(const lftag::Camera& camera, double tag_size) {
-  lftag::DetectorParams params;
+  lftag::DetectorParams params = base_;
   params.families = {family_};
   params.camera = camera;
   params.tag_size = tag_size;
@@ -39,6 +39,10 @@ std::vector<Detected> LftagSystem::detect(const cv::Mat1b& grey) {
     det.points.assign(d.keypoints.begin(), d.keypoints.end());
     det.center = d.center;
     det.pose = Pose{d.rvec, d.tvec};
+    if (d.ambiguity_ratio > 0) {
+      det.alternative = Pose{d.alternative_rvec, d.alternative_tvec};
+      det.ambiguity_ratio = d.ambiguity_ratio;
+    }
     det.confidence = d.noise_margin;
     det.path = d.from_outline ? "outline" : "topology";
     out.push_back(std::move(det));

@@ -5,6 +5,7 @@
 
 #include <memory>
 #include <string>
+#include <utility>
 
 #include "lftag/detector.hpp"
 #include "system.hpp"
@@ -13,7 +14,8 @@ namespace bench {
 
 class LftagSystem : public FiducialSystem {
  public:
-  explicit LftagSystem(int n) : family_(n) {}
+  // `base`: the parameters besides the family, camera and tag size (an experiment's variant).
+  explicit LftagSystem(int n, lftag::DetectorParams base = {}) : family_(n), base_(std::move(base)) {}
 
   std::string name() const override { return "lftag-" + family_.name(); }
   std::string family() const override { return "lftag-" + family_.name(); }
@@ -27,6 +29,7 @@ class LftagSystem : public FiducialSystem {
 
  private:
   lftag::Family family_;
+  lftag::DetectorParams base_;
   std::unique_ptr<lftag::Detector> detector_;
   lftag::DetectionStats stats_;
 };

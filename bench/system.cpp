@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 #include "system.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -27,18 +28,25 @@ lftag::SceneTarget FiducialSystem::target(const std::string& id, double tag_size
   return {albedo, tag_size / fine.cols, rvec, tvec};
 }
 
-std::optional<Pose> square_pose(const std::vector<cv::Point2d>& corners, double size, const lftag::Camera& camera) {
-  if (corners.size() != 4) return std::nullopt;
+void set_square_pose(Detected& det, double size, const lftag::Camera& camera) {
+  const std::vector<cv::Point2d>& corners = det.points;
+  if (corners.size() != 4) return;
   // IPPE_SQUARE wants the object points (-s/2, s/2), (s/2, s/2), (s/2, -s/2), (-s/2, -s/2);
   // with y down (SPEC 2) those are bottom-left, bottom-right, top-right, top-left.
   const double h = size / 2;
   const std::vector<cv::Point3d> object{{-h, h, 0}, {h, h, 0}, {h, -h, 0}, {-h, -h, 0}};
   const std::vector<cv::Point2d> image{corners[3], corners[2], corners[1], corners[0]};
-  Pose pose;
-  if (!cv::solvePnP(object, image, cv::Mat(camera.matrix()), camera.distortion_mat(), pose.rvec, pose.tvec, false,
-                    cv::SOLVEPNP_IPPE_SQUARE))
-    return std::nullopt;
-  return pose;
+  std::vector<cv::Mat> rvecs, tvecs;
+  cv::Mat errors;
+  // solvePnPGeneric sorts the solutions by reprojection error: the first is solvePnP's.
+  if (cv::solvePnPGeneric(object, image, cv::Mat(camera.matrix()), camera.distortion_mat(), rvecs, tvecs, false,
+                          cv::SOLVEPNP_IPPE_SQUARE, cv::noArray(), cv::noArray(), errors) == 0)
+    return;
+  det.pose = Pose{cv::Vec3d(rvecs[0]), cv::Vec3d(tvecs[0])};
+  if (rvecs.size() > 1) {
+    det.alternative = Pose{cv::Vec3d(rvecs[1]), cv::Vec3d(tvecs[1])};
+    det.ambiguity_ratio = errors.at<double>(1) / std::max(errors.at<double>(0), 1e-12);
+  }
 }
 
 cv::Point2d quad_center(const std::vector<cv::Point2d>& c) {

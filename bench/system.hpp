@@ -27,6 +27,10 @@ struct Detected {
   std::vector<cv::Point2d> points;  // what the system localises: quad corners or key points
   cv::Point2d center;               // the marker centre in the image
   std::optional<Pose> pose;
+  // The planar pose's other solution, and its reprojection error over the chosen one's
+  // (NaN when the system gives none).
+  std::optional<Pose> alternative;
+  double ambiguity_ratio = std::numeric_limits<double>::quiet_NaN();
   // The system's own measure of how sure the id is (LFTag: Detection::noise_margin;
   // AprilTag: decision_margin), and which of its paths read it; NaN and empty when none.
   double confidence = std::numeric_limits<double>::quiet_NaN();
@@ -73,10 +77,12 @@ class FiducialSystem {
                             const cv::Vec3d& tvec) const;
 };
 
-// Pose of a square of edge `size` metres, centred on the marker centre, from its image
-// corners clockwise from the marker's top-left, by OpenCV's IPPE for squares.
-std::optional<Pose> square_pose(const std::vector<cv::Point2d>& corners, double size,
-                                const lftag::Camera& camera);
+// The pose (and the other solution, with the ratio of their reprojection errors) of a
+// square of edge `size` metres, centred on the marker centre, from its image corners
+// `det.points`, clockwise from the marker's top-left, by OpenCV's IPPE for squares, which
+// chooses the solution with the smaller reprojection error over the four corners. Leaves
+// them unset when it fails.
+void set_square_pose(Detected& det, double size, const lftag::Camera& camera);
 
 // Where the diagonals of a quadrilateral (corners in order around it) cross: the image
 // of the square's centre.

@@ -82,6 +82,67 @@ def pose_table(results):
     return table(["system", "2 m", "10 m", "15 m", "3 m, tilt 0", "tilt 45", "tilt 75"], rows)
 
 
+AMBIGUITY_RULES = [("lftag-3x3", "default"), ("lftag-3x3", "centroids"), ("lftag-3x3", "shapes"),
+                   ("lftag-4x4", "default"), ("lftag-4x4", "centroids"), ("lftag-4x4", "shapes"),
+                   ("apriltag-36h11-d1", "ippe-corners"), ("apriltag-36h11-d1", "estimate-tag-pose"),
+                   ("apriltag-36h11-d2", "ippe-corners"), ("apriltag-36h11-d2", "estimate-tag-pose")]
+
+
+def ambiguity_table(results, by, column="wrong_pct", condition="clean"):
+    """`column` (wrong choices or flips, % of the markers found), tuning / validation, by size or by tilt."""
+    other = "tilt_deg" if by == "size_px" else "size_px"
+    cells = defaultdict(dict)
+    steps = []
+    for r in read(results, "ambiguity_summary.csv"):
+        if r[other] or not r[by] or r["condition"] != condition:
+            continue
+        step = f"{float(r[by]):g}"
+        if step not in steps:
+            steps.append(step)
+        cells[(r["system"], r["rule"])][(r["set"], step)] = r
+    def cell(key, step):
+        parts = []
+        for s in ("tuning", "validation"):
+            r = cells[key].get((s, step))
+            parts.append(f"{float(r[column]):.1f}" if r and r[column] else "-")
+        return " / ".join(parts)
+    rows = [[f"{k[0]} {k[1]}"] + [cell(k, st) for st in steps] for k in AMBIGUITY_RULES if k in cells]
+    unit = " px" if by == "size_px" else " deg"
+    return table(["system, rule"] + [st + unit for st in steps], rows)
+
+
+def ambiguity_size_table(results, condition="clean"):
+    return ambiguity_table(results, "size_px", condition=condition)
+
+
+def ambiguity_tilt_table(results, condition="clean"):
+    return ambiguity_table(results, "tilt_deg", condition=condition)
+
+
+def ambiguity_flips_table(results, condition="clean"):
+    return ambiguity_table(results, "size_px", "flips_pct", condition)
+
+
+def ambiguity_ratio_table(results, condition="clean"):
+    """Both sets: the wrong choices (and flips) among the markers found, by the system's ratio."""
+    counts = defaultdict(lambda: defaultdict(lambda: [0, 0, 0]))
+    bins = []
+    for r in read(results, "ambiguity_ratios.csv"):
+        if r["condition"] != condition:
+            continue
+        b = (float(r["ratio_from"]), float(r["ratio_to"]) if r["ratio_to"] else None)
+        if b not in bins:
+            bins.append(b)
+        c = counts[(r["system"], r["rule"])][b]
+        c[0] += int(r["found"])
+        c[1] += int(r["wrong"])
+        c[2] += int(r["flips"])
+    bins.sort(key=lambda b: b[0])
+    header = ["system, rule"] + [f"{lo:g} to {hi:g}" if hi is not None else f"{lo:g} and over" for lo, hi in bins]
+    rows = [[f"{k[0]} {k[1]}"] + [f"{counts[k][b][1]} ({counts[k][b][2]}) of {counts[k][b][0]}" for b in bins]
+            for k in AMBIGUITY_RULES if k in counts]
+    return table(header, rows)
+
 def fp_table(results):
     totals = defaultdict(lambda: [0, 0, 0])
     for r in read(results, "fp_summary.csv"):
@@ -297,6 +358,15 @@ def main(results):
     results = Path(results)
     for title, make in [("Range", range_table), ("Grazing angle", angle_table), ("Motion blur", blur_table),
                         ("Pose (median rotation deg / translation % of distance)", pose_table),
+                        ("Wrong pose choices by size (% of found; tuning / validation)", ambiguity_size_table),
+                        ("Wrong pose choices by tilt (% of found; tuning / validation)", ambiguity_tilt_table),
+                        ("Wrong pose choices more than 10 deg off, by size (% of found; tuning / validation)",
+                         ambiguity_flips_table),
+                        ("Wrong pose choices by ambiguity ratio (both sets)", ambiguity_ratio_table),
+                        ("Webcam: wrong pose choices by size", lambda r: ambiguity_size_table(r, "webcam")),
+                        ("Webcam: wrong pose choices by tilt", lambda r: ambiguity_tilt_table(r, "webcam")),
+                        ("Webcam: flips by size", lambda r: ambiguity_flips_table(r, "webcam")),
+                        ("Webcam: wrong pose choices by ambiguity ratio", lambda r: ambiguity_ratio_table(r, "webcam")),
                         ("False positives", fp_table), ("Funnel", funnel_table), ("Speed", speed_table),
                         ("Stages", stage_table), ("Throughput", throughput_table), ("Video", video_table),
                         ("Video recall by projected edge and tilt", video_bins_table),

@@ -16,6 +16,39 @@ Pose place(const lftag::Camera& camera, cv::Point2d center, double distance, con
   return {rvec, cv::Vec3d(x * distance, y * distance, distance)};
 }
 
+Pose facing_pose(const lftag::Camera& camera, cv::Point2d center, double edge, double tilt, double tilt_axis,
+                 double roll, double tag_size) {
+  const auto rotation = [](const cv::Vec3d& axis_angle) {
+    cv::Matx33d r;
+    cv::Rodrigues(axis_angle, r);
+    return r;
+  };
+  const cv::Vec3d ray =
+      cv::normalize(cv::Vec3d((center.x - camera.cx) / camera.fx, (center.y - camera.cy) / camera.fy, 1));
+  const cv::Vec3d axis = cv::Vec3d(0, 0, 1).cross(ray);
+  const double turn = std::asin(std::min(1.0, cv::norm(axis)));
+  const cv::Matx33d to_ray = rotation(turn > 1e-12 ? axis * (turn / cv::norm(axis)) : cv::Vec3d());
+  const double d = CV_PI / 180;
+  const cv::Matx33d tilted = rotation(cv::Vec3d(std::cos(tilt_axis * d), std::sin(tilt_axis * d), 0) * (tilt * d));
+  Pose pose;
+  cv::Rodrigues(to_ray * tilted * rotation({0, 0, roll * d}), pose.rvec);
+  // The edge is nearly inverse to the distance (not quite, once tilted): a few corrections.
+  double distance = camera.fx * tag_size / edge;
+  for (int i = 0; i < 3; ++i) {
+    pose.tvec = ray * distance;
+    distance *= edge_px(camera, pose, tag_size) / edge;
+  }
+  pose.tvec = ray * distance;
+  return pose;
+}
+
+double tilt_from_sight_deg(const Pose& pose) {
+  cv::Matx33d r;
+  cv::Rodrigues(pose.rvec, r);
+  const cv::Vec3d normal = r * cv::Vec3d(0, 0, 1);
+  return std::acos(std::clamp(normal.dot(cv::normalize(pose.tvec)), -1.0, 1.0)) * 180 / CV_PI;
+}
+
 cv::Point2d jittered_center(const lftag::Camera& camera, std::mt19937_64& rng) {
   std::uniform_real_distribution<double> offset(-0.5, 0.5);
   const double dx = offset(rng), dy = offset(rng);
@@ -59,6 +92,8 @@ Outcome score(const std::vector<Detected>& detections, const std::string& id, co
       out.translation_error_m = cv::norm(d.pose->tvec - truth.tvec);
       out.depth_error_m = cv::norm(d.pose->tvec) - cv::norm(truth.tvec);
     }
+    if (d.alternative) out.alternative_rotation_error_deg = rotation_error_deg(d.alternative->rvec, truth.rvec);
+    out.ambiguity_ratio = d.ambiguity_ratio;
   }
   return out;
 }

@@ -26,6 +26,16 @@ lftag::Camera paper_camera();
 // ray through image point `center`.
 Pose place(const lftag::Camera& camera, cv::Point2d center, double distance, const cv::Vec3d& rvec);
 
+// The pose whose marker centre is seen at image point `center` (no distortion), tilted by
+// `tilt` degrees from facing the camera along that line of sight, about an axis across it
+// at `tilt_axis` degrees in the image, rolled by `roll` degrees, at the distance along the
+// line that gives a mean projected tag edge of `edge` pixels.
+Pose facing_pose(const lftag::Camera& camera, cv::Point2d center, double edge, double tilt, double tilt_axis,
+                 double roll, double tag_size);
+
+// Degrees between the marker's normal and the line of sight to its centre.
+double tilt_from_sight_deg(const Pose& pose);
+
 // The image centre moved by a random sub-pixel offset (up to half a pixel each way).
 cv::Point2d jittered_center(const lftag::Camera& camera, std::mt19937_64& rng);
 
@@ -36,6 +46,8 @@ struct Outcome {
   double rotation_error_deg = kNaN;   // of the found detection, when it has a pose
   double translation_error_m = kNaN;
   double depth_error_m = kNaN;  // signed: the found distance to the camera minus the true one
+  double alternative_rotation_error_deg = kNaN;  // of the planar pose's other solution, when given
+  double ambiguity_ratio = kNaN;                 // the system's, when given
 };
 
 // Mean projected edge of the tag (outer border) in pixels.

@@ -77,8 +77,10 @@
  *   alternative-reprojection-error
  *                      gdouble      its RMS over the centroids, pixels
  *   ambiguity-ratio    gdouble      alternative-reprojection-error over
- *                                   reprojection-error: near 1 the pose is ambiguous,
- *                                   from about 3 settled; 0 without a second solution
+ *                                   reprojection-error: under about 2 the pose may be
+ *                                   the flip (under 1: the squares' foreshortening
+ *                                   chose it against the centroids), from 3 settled;
+ *                                   0 without a second solution
  *   from-outline       gboolean     read from the grey levels under its aligned outline
  *                                   (far or blurred; decode-error and worst-cell are 0)
  * Truth only:

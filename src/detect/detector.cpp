@@ -65,6 +65,7 @@ void DetectorParams::validate() const {
   for (double t : max_decode_error)
     if (!(t >= 0) || !std::isfinite(t)) fail("decode error thresholds (tau3) must be finite and not negative");
   if (!(tag_size > 0) || !std::isfinite(tag_size)) fail("the tag size must be positive");
+  if (!(shape_choice_ratio >= 0)) fail("the shape choice ratio must be at least 0 (0: by the centroids alone)");
   if (camera) camera->validate();
 }
 

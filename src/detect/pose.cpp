@@ -3,7 +3,8 @@
 // both of IPPE's solutions; the one that fits best is the pose, the other is reported
 // with it. A blob's centroid is the centroid of its projected square, which perspective moves off
 // the projection of the square's centre; one correction with the first pose removes
-// that bias before the refinement.
+// that bias before the refinement. When the two fit the centroids nearly alike, the
+// squares' inks can tell them apart (DetectorParams::shape_choice_ratio).
 #include <algorithm>
 #include <cmath>
 
@@ -22,6 +23,7 @@ struct Solution {
   cv::Vec3d rvec, tvec;
   std::vector<cv::Point2d> observed;
   double rms = 0;
+  double shape_misfit = 0;  // see shape_misfit()
 };
 
 double rms_error(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& image, const cv::Vec3d& rvec,
@@ -36,6 +38,34 @@ double rms_error(const std::vector<cv::Point3d>& object, const std::vector<cv::P
   return std::sqrt(sq / double(image.size()));
 }
 
+// How badly a pose's foreshortening explains the squares' inks: a square's image area is
+// its design area times det(H) / z^3 at its depth z (the Jacobian of the plane's
+// homography), so log(ink / design area) + 3 log z is one constant over the squares. A
+// separate constant for the two baselines, whose larger squares the blobs' reach cuts
+// differently under blur, keeps that bias from reading as a tilt. The sum of squared
+// residuals; NaN without inks (an outline reading).
+double shape_misfit(const std::vector<double>& log_ink, const std::vector<bool>& baseline,
+                    const std::vector<cv::Point3d>& object, const cv::Vec3d& rvec, const cv::Vec3d& tvec) {
+  if (log_ink.empty()) return std::nan("");
+  cv::Matx33d r;
+  cv::Rodrigues(rvec, r);
+  std::vector<double> residual;
+  double sum[2] = {0, 0};
+  int count[2] = {0, 0};
+  for (std::size_t g = 0; g < object.size(); ++g) {
+    const double z = (r * cv::Vec3d(object[g].x, object[g].y, object[g].z) + tvec)[2];
+    if (!(z > 0)) return std::nan("");
+    residual.push_back(log_ink[g] + 3 * std::log(z));
+    sum[baseline[g]] += residual.back(), ++count[baseline[g]];
+  }
+  double ss = 0;
+  for (std::size_t g = 0; g < object.size(); ++g) {
+    const double e = residual[g] - sum[baseline[g]] / count[baseline[g]];
+    ss += e * e;
+  }
+  return ss;
+}
+
 }  // namespace
 
 bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,
@@ -45,12 +75,18 @@ bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, 
   std::vector<cv::Point3d> object;
   std::vector<cv::Point2d> image;
   std::vector<UnitRect> squares;
+  std::vector<double> log_ink;  // per design area; empty when a square has no ink measured
+  std::vector<bool> baseline;
   for (int g = 0; g < f.cell_count(); ++g) {
     const int digit = f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g));
+    const Blob& blob = c.blobs[d.blob_of_cell[g]];
     object.push_back(f.to_marker_frame(f.center(g, digit), size));
-    image.push_back(c.blobs[d.blob_of_cell[g]].point);
+    image.push_back(blob.point);
     squares.push_back(f.square(g, digit));
+    log_ink.push_back(std::log(blob.mass / (squares.back().width * squares.back().height)));
+    baseline.push_back(f.is_baseline(g));
   }
+  if (!std::all_of(log_ink.begin(), log_ink.end(), [](double v) { return std::isfinite(v); })) log_ink.clear();
   const cv::Matx33d k = camera.matrix();  // the points are undistorted already
   std::vector<cv::Point3d> corners;
   for (const UnitRect& s : squares)
@@ -74,6 +110,7 @@ bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, 
       cv::solvePnPRefineLM(object, s.observed, k, cv::noArray(), s.rvec, s.tvec);
     }
     s.rms = rms_error(object, s.observed, s.rvec, s.tvec, k);
+    s.shape_misfit = shape_misfit(log_ink, baseline, object, s.rvec, s.tvec);
     return s;
   };
   std::vector<Solution> solutions;
@@ -91,6 +128,10 @@ bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, 
   if (solutions.empty()) return false;
   std::stable_sort(solutions.begin(), solutions.end(),
                    [](const Solution& a, const Solution& b) { return a.rms < b.rms; });
+  // Where the centroids hardly tell the two apart, the squares' foreshortening does.
+  if (solutions.size() > 1 && solutions[1].rms < params.shape_choice_ratio * solutions[0].rms &&
+      solutions[1].shape_misfit < solutions[0].shape_misfit)
+    std::swap(solutions[0], solutions[1]);
   const Solution& best = solutions[0];
   const cv::Vec3d rvec = best.rvec, tvec = best.tvec;
   out.reprojection_error = best.rms;
@@ -100,6 +141,7 @@ bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, 
     out.alternative_rvec = solutions[1].rvec, out.alternative_tvec = solutions[1].tvec;
     out.alternative_reprojection_error = solutions[1].rms;
     // A perfect fit (a synthetic marker) is unambiguous whenever the other is not perfect.
+    // Under 1 when the squares' foreshortening chose against the centroids.
     out.ambiguity_ratio = solutions[1].rms / std::max(best.rms, 1e-12);
   }
   out.rvec = rvec, out.tvec = tvec;

@@ -43,10 +43,12 @@ inline nlohmann::json detection_json(const Detection& d) {
             {"calibrated", d.calibrated},
             {"tag_size", d.tag_size},
             {"ambiguity_ratio", d.ambiguity_ratio},
-            {"alternative",
-             {{"rvec", vec_json(d.alternative_rvec)},
-              {"tvec", vec_json(d.alternative_tvec)},
-              {"reprojection_error", d.alternative_reprojection_error}}}}},
+            // null when there was no other solution (ratio 0), never a zero pose
+            {"alternative", d.ambiguity_ratio > 0 ? nlohmann::json{{"rvec", vec_json(d.alternative_rvec)},
+                                                                   {"tvec", vec_json(d.alternative_tvec)},
+                                                                   {"reprojection_error",
+                                                                    d.alternative_reprojection_error}}
+                                                 : nlohmann::json(nullptr)}}},
           {"decode_error", d.decode_error},
           {"worst_cell", d.worst_cell},
           {"noise_margin", d.noise_margin},

@@ -155,6 +155,16 @@ struct DetectorParams {
   std::optional<Camera> camera;
   double tag_size = 0.1;   // metres, outer edge of the black border
   bool refine_pose = true; // iterative refinement of the final pose on all n^2 centroids
+  // The planar pose's two solutions (see Detection::ambiguity_ratio) are told apart by how
+  // well they fit the n^2 centroids, and, when the other fits within this factor of the
+  // best, by the squares' foreshortening instead: the side of the marker nearer the camera
+  // images larger, so each solution predicts each square's ink (area grows as depth^-3),
+  // and the one whose prediction fits the measured inks best is chosen. 0: by the
+  // centroids alone. Markers read from their outline have no measured inks. Chosen on the
+  // ambiguity experiment's tuning set (docs/BENCHMARKS.md): wrong choices of 3x3 and 4x4
+  // 123 -> 106, and on its validation set 129 -> 111; from 1.05 up the inks, whose
+  // foreshortening is a few per cent on a small marker, choose worse than the centroids.
+  double shape_choice_ratio = 1.03;
 
   // The tau3 in force for `family`.
   double decode_threshold(const Family& family) const;
