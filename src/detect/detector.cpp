@@ -263,7 +263,7 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
           if (reading->read) verdict->reading = reading->id;
           verdict->correlation = reading->correlation, verdict->marker_correlation = reading->marker_correlation;
           verdict->contrast = reading->contrast, verdict->margin = reading->margin;
-          verdict->noise_margin = reading->noise_margin;
+          verdict->noise_margin = reading->noise_margin, verdict->evidence = reading->evidence;
           verdict->pixels_per_unit = reading->pixels_per_unit, verdict->smear = reading->smear;
           verdict->defocus = reading->defocus;
         }

@@ -610,6 +610,7 @@ class PixelModel {
     // The least worsening over the variance of the best fit's residuals (noise and misfit).
     double gain_over_variance = 0;
     double noise_margin = 0;  // OutlineReading::noise_margin
+    double evidence = 0;      // OutlineReading::evidence
   };
 
   // The id whose predicted pixels fit the grey levels best (least squares with the
@@ -640,7 +641,7 @@ class PixelModel {
           best_rss = fit.rss;
           best = {fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
                   cv::norm(smear_) * scale, fit.rss > 0 ? fit.least_gain / (fit.rss / fit.samples) : 0,
-                  fit.noise_margin};
+                  fit.noise_margin, fit.evidence};
           if (!(fit.ink > 0.4 * contrast)) best.margin = 0;
         }
       }
@@ -669,6 +670,7 @@ class PixelModel {
     TagId id;
     double rss = 0, ink = 0, least_gain = 0, samples = 0;
     double noise_margin = 0;  // Reading::noise_margin
+    double evidence = 0;      // Reading::evidence
   };
 
   // The variance of sum(delta * noise) over a rectangle of pixels, in units of the noise's
@@ -778,7 +780,9 @@ class PixelModel {
       return rr > 0 && pairs > 0 ? std::clamp(sum / pairs / (rr / sums.n), 0.0, 0.95) : 0.0;
     };
     const double rho_x = correlation(across, pairs_across), rho_y = correlation(down, pairs_down);
-    fit.noise_margin = std::numeric_limits<double>::infinity();
+    // The evidence: each move's worsening of the fit over the worsening the model predicts
+    // for it, |p|^2 (the image's own misfit and noise take some of it away).
+    fit.noise_margin = fit.evidence = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < cells_.size(); ++i) {
       const cv::Rect& r = squares_[i][0].rect;
       for (int d = 0; d < 4; ++d) {
@@ -787,12 +791,15 @@ class PixelModel {
         for (int y = 0; y < r.height; ++y)
           for (int x = 0; x < r.width; ++x)
             if (use_(r.y + y, r.x + x)) delta(y, x) = squares[i][d](y, x) - squares[i][digit[i]](y, x);
+        const double predicted = fit.ink * fit.ink * delta.dot(delta);  // before correlated_power filters delta
         const double spread = fit.ink * fit.ink * variance * correlated_power(delta, rho_x, rho_y);
         const double gain = moved(i, d).rss() - fit.rss;
         fit.noise_margin = std::min(fit.noise_margin, spread > 0 ? gain / (2 * std::sqrt(spread)) : 0.0);
+        fit.evidence = std::min(fit.evidence, predicted > 0 ? gain / predicted : 0.0);
       }
     }
     if (!std::isfinite(fit.noise_margin)) fit.noise_margin = 0;
+    if (!std::isfinite(fit.evidence)) fit.evidence = 0;
     return fit;
   }
 
@@ -1307,6 +1314,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   out.id = reading->id;
   out.margin = margin_of(*reading);
   out.noise_margin = reading->noise_margin;
+  out.evidence = reading->evidence;
   out.smear = reading->smear / out.pixels_per_unit;
 
   // The final homography: the whole marker of the id read, every square in place, aligned
@@ -1348,15 +1356,17 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     if (again->id == out.id) {
       out.margin = std::min(out.margin, margin_of(*again));
       out.noise_margin = std::min(out.noise_margin, again->noise_margin);
+      out.evidence = again->evidence;  // the final alignment's: the first reading's is a start
       out.smear = std::max(out.smear, again->smear / out.pixels_per_unit);
       return out;
     }
     out.id = again->id;
     out.margin = margin_of(*again);
     out.noise_margin = again->noise_margin;
+    out.evidence = again->evidence;
     out.smear = again->smear / out.pixels_per_unit;
   }
-  out.margin = out.noise_margin = 0;  // the reading never settled
+  out.margin = out.noise_margin = out.evidence = 0;  // the reading never settled
   return out;
 }
 
@@ -1374,7 +1384,7 @@ Stage outline_stage(const OutlineReading& r, const DetectorParams& params) {
   if (r.correlation < kMinCorrelation) return Stage::structure;
   if (r.contrast < kMinContrast) return Stage::contrast;
   if (r.baseline_gap < kMinBaselineGap) return Stage::baselines;
-  if (r.margin < kMinMargin) return Stage::margin;
+  if (r.margin < kMinMargin || r.evidence < kMinEvidence) return Stage::margin;
   if (r.marker_correlation < kMinMarkerCorrelation) return Stage::marker;
   if (r.smear > kMaxSmear) return Stage::smear;
   return Stage::detected;

@@ -291,6 +291,10 @@ struct OutlineReading {
   double noise_margin = 0;       // standard deviations of the fit's residuals by which the
                                  // least certain cell stands from another digit (least of
                                  // the readings made; see Detection::noise_margin)
+  double evidence = 0;           // least, over the data cells and their other positions, of
+                                 // how much the fit worsens when the square moves there, over
+                                 // how much the model predicts (1: the image shows the whole
+                                 // difference; 0: it lies halfway), under the final alignment
   double baseline_gap = 0;       // how much more the two baseline corners look like baselines
                                  // than the other two (0..1 of the contrast)
   double pixels_per_unit = 0;    // along the most foreshortened direction, at the centre
@@ -319,6 +323,15 @@ constexpr double kMinSharpStartCorrelation = 0.55, kSharpPixelsPerUnit = 1.5;
 // tilt, defocused by 1.45 px, aligned at 0.58 to 0.60 before its defocus took it to 0.76.
 constexpr double kMinSmearedCorrelation = 0.55;
 constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContrast = 16, kMinMargin = 0.03, kMinBaselineGap = 0.25;
+// Every data cell must show this much of the difference between its square's position and
+// each other one (OutlineReading::evidence): a cell under it lies within 0.3 of the way
+// from halfway, where compression or noise decides the digit (the blobs' counterpart is
+// DetectorParams::max_cell_residual). Scale- and contrast-free: the model's prediction is
+// the yardstick. Chosen on the field experiment's tuning set, where every wrong outline
+// reading (small markers through H.264 at 1080p) had 0.38 or less, and on the outline
+// and detector tests' renders at the resolution and blur limits, whose right readings had
+// 0.37 (one) and 0.41 or more; the validation set's wrong ones had 0.16 at most.
+constexpr double kMinEvidence = 0.4;
 // Outline reads a frame at most (each outline and family is one): the work bound of a
 // frame full of marker-like clusters, where every read aligns a template.
 constexpr int kMaxOutlineReads = 32;

@@ -63,6 +63,7 @@ nlohmann::json outline_json(const OutlineVerdict& v) {
                         {"contrast", v.contrast},
                         {"margin", v.margin},
                         {"noise_margin", v.noise_margin},
+                        {"evidence", v.evidence},
                         {"pixels_per_unit", v.pixels_per_unit},
                         {"smear", v.smear},
                         {"defocus", v.defocus}};

@@ -641,3 +641,79 @@ TEST(OutlineReading, StopsAtTheFramesDeadline) {
   }
   EXPECT_GE(read, 6) << "the markers are no longer read without a deadline: the test shows nothing";
 }
+
+namespace {
+
+// A fronto-parallel 3x3 marker at `pixels_per_unit` on a 4-unit white margin, rendered by
+// exact area coverage, with data cell `cell`'s square moved `shift` units to the right of
+// where `id` puts it (its digit's bit 1 moves it one unit right); and its outer corners.
+struct Shifted {
+  cv::Mat1b image;
+  std::array<cv::Point2d, 4> corners;
+};
+Shifted shifted_marker(TagId id, int cell, double shift, double pixels_per_unit) {
+  const Family f(3);
+  constexpr int kFine = 20;  // grid cells per unit: shifts of 0.05 units
+  const int margin = 4, side = f.side() + 2 * margin;
+  cv::Mat1f grid(side * kFine, side * kFine, 1.0f);
+  const auto fill = [&](double x, double y, double w, double h) {
+    grid(cv::Rect(int(std::lround((x + margin) * kFine)), int(std::lround((y + margin) * kFine)),
+                  int(std::lround(w * kFine)), int(std::lround(h * kFine)))) = 0.0f;
+  };
+  const double s = f.side();
+  fill(0, 0, s, 2), fill(0, s - 2, s, 2), fill(0, 0, 2, s), fill(s - 2, 0, 2, s);
+  for (int g = 0; g < f.cell_count(); ++g) {
+    const UnitRect q = f.square(g, f.is_baseline(g) ? 0 : id.digit(f.data_index(g)));
+    fill(q.x + (g == cell ? shift : 0), q.y, q.width, q.height);
+  }
+  const double ppc = pixels_per_unit / kFine;
+  const cv::Size size(int(std::ceil(side * pixels_per_unit)), int(std::ceil(side * pixels_per_unit)));
+  const cv::Mat1f grey = resample_cells(grid, size, ppc, {-0.5, -0.5});
+  Shifted out;
+  grey.convertTo(out.image, CV_8U, 190, 40);  // ink 40, paper 230
+  const auto at = [&](double x, double y) {
+    return cv::Point2d((x + margin) * pixels_per_unit - 0.5, (y + margin) * pixels_per_unit - 0.5);
+  };
+  out.corners = {at(0, 0), at(s, 0), at(s, s), at(0, s)};
+  return out;
+}
+
+}  // namespace
+
+TEST(OutlineReading, EveryCellMustShowMostOfTheDifferenceItsDigitMakes) {
+  // The evidence check at its boundary: a square moved part of the way towards its next
+  // position shows that share less of the difference between them (1 - 2 x share of a
+  // unit, on an exact render: the bound, 0.4, is a shift of 0.3). Moved 0.25 units it
+  // still reads as itself; moved 0.35 (the cell's evidence is then 0.3, and the
+  // per-pixel margin still passes), halfway or 0.65 (the near miss of the other id), no
+  // digit is certain and the reading is refused; from 0.75 units on it reads as that
+  // other id.
+  DetectorParams params;
+  const Family f(3);
+  const TagId id(6789);
+  const int cell = 4;  // a data cell of the middle row
+  ASSERT_FALSE(f.is_baseline(cell));
+  const int digit = id.digit(f.data_index(cell));
+  ASSERT_EQ(digit >> 1, 0) << "the square must be free to move right";
+  const TagId moved = id.with_digit(f.data_index(cell), digit | 2);
+  for (const double ppu : {1.0, 2.5}) {
+    for (const auto& [shift, expected] : {std::pair{0.0, std::optional<TagId>(id)}, std::pair{0.25, std::optional<TagId>(id)},
+                                          std::pair{0.35, std::optional<TagId>()}, std::pair{0.5, std::optional<TagId>()},
+                                          std::pair{0.65, std::optional<TagId>()}, std::pair{0.75, std::optional<TagId>(moved)},
+                                          std::pair{1.0, std::optional<TagId>(moved)}}) {
+      const std::string what = std::to_string(ppu) + " px per unit, moved " + std::to_string(shift);
+      const Shifted m = shifted_marker(id, cell, shift, ppu);
+      const auto reading = read_outline(ImageView(m.image), m.corners, f);
+      ASSERT_TRUE(reading) << what;
+      if (expected) {
+        EXPECT_TRUE(acceptable(*reading, params)) << what << ": evidence " << reading->evidence;
+        EXPECT_EQ(reading->id, *expected) << what;
+        EXPECT_GE(reading->evidence, kMinEvidence) << what;
+      } else {
+        EXPECT_FALSE(acceptable(*reading, params)) << what << " read " << reading->id.to_decimal();
+        EXPECT_LT(reading->evidence, kMinEvidence) << what;
+        EXPECT_EQ(outline_stage(*reading, params), Stage::margin) << what;
+      }
+    }
+  }
+}

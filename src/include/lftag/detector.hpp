@@ -313,6 +313,8 @@ struct OutlineVerdict {
                                          // (under a defocus: as the template's blur shows it)
   double margin = 0;                     // how much worse each cell's runner-up fits (least)
   double noise_margin = 0;               // the same in standard deviations of the noise
+  double evidence = 0;                   // least share of each cell's predicted difference
+                                         // to its other positions that the image shows
   double pixels_per_unit = 0;            // along the most foreshortened direction
   double smear = 0;                      // length of the motion blur found, units
   double defocus = 0;                    // Gaussian defocus found, units (sigma)
