@@ -165,23 +165,7 @@ Placement between(const Placement& a, const Placement& b, double s) {
 // The pose of a placement, facing the camera along the line of sight through its image
 // point (through the lens distortion, if any), at the distance that gives its edge.
 Pose pose_of(const lftag::Camera& camera, const Placement& p) {
-  const cv::Point2d ideal = camera.undistort({p.center})[0];
-  const cv::Vec3d ray =
-      cv::normalize(cv::Vec3d((ideal.x - camera.cx) / camera.fx, (ideal.y - camera.cy) / camera.fy, 1));
-  const cv::Vec3d axis = cv::Vec3d(0, 0, 1).cross(ray);
-  const double turn = std::asin(std::min(1.0, cv::norm(axis)));
-  const cv::Matx33d to_ray = rotation(turn > 1e-12 ? axis * (turn / cv::norm(axis)) : cv::Vec3d());
-  const double d = CV_PI / 180;
-  const cv::Matx33d tilt = rotation(cv::Vec3d(std::cos(p.tilt_axis * d), std::sin(p.tilt_axis * d), 0) * (p.tilt * d));
-  Pose pose;
-  cv::Rodrigues(to_ray * tilt * rotation({0, 0, p.roll * d}), pose.rvec);
-  double distance = camera.fx * kTagSize / p.edge;
-  for (int i = 0; i < 4; ++i) {
-    pose.tvec = ray * distance;
-    distance *= edge_px(camera, pose, kTagSize) / p.edge;
-  }
-  pose.tvec = ray * distance;
-  return pose;
+  return facing_pose(camera, p.center, p.edge, p.tilt, p.tilt_axis, p.roll, kTagSize);
 }
 
 double tilt_deg(const Pose& pose) {

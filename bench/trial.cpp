@@ -23,8 +23,9 @@ Pose facing_pose(const lftag::Camera& camera, cv::Point2d center, double edge, d
     cv::Rodrigues(axis_angle, r);
     return r;
   };
+  const cv::Point2d ideal = camera.undistort({center})[0];
   const cv::Vec3d ray =
-      cv::normalize(cv::Vec3d((center.x - camera.cx) / camera.fx, (center.y - camera.cy) / camera.fy, 1));
+      cv::normalize(cv::Vec3d((ideal.x - camera.cx) / camera.fx, (ideal.y - camera.cy) / camera.fy, 1));
   const cv::Vec3d axis = cv::Vec3d(0, 0, 1).cross(ray);
   const double turn = std::asin(std::min(1.0, cv::norm(axis)));
   const cv::Matx33d to_ray = rotation(turn > 1e-12 ? axis * (turn / cv::norm(axis)) : cv::Vec3d());
@@ -34,7 +35,7 @@ Pose facing_pose(const lftag::Camera& camera, cv::Point2d center, double edge, d
   cv::Rodrigues(to_ray * tilted * rotation({0, 0, roll * d}), pose.rvec);
   // The edge is nearly inverse to the distance (not quite, once tilted): a few corrections.
   double distance = camera.fx * tag_size / edge;
-  for (int i = 0; i < 3; ++i) {
+  for (int i = 0; i < 4; ++i) {
     pose.tvec = ray * distance;
     distance *= edge_px(camera, pose, tag_size) / edge;
   }

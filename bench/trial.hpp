@@ -26,7 +26,8 @@ lftag::Camera paper_camera();
 // ray through image point `center`.
 Pose place(const lftag::Camera& camera, cv::Point2d center, double distance, const cv::Vec3d& rvec);
 
-// The pose whose marker centre is seen at image point `center` (no distortion), tilted by
+// The pose whose marker centre is seen at image point `center` (through the lens
+// distortion, if any), tilted by
 // `tilt` degrees from facing the camera along that line of sight, about an axis across it
 // at `tilt_axis` degrees in the image, rolled by `roll` degrees, at the distance along the
 // line that gives a mean projected tag edge of `edge` pixels.
