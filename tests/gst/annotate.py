@@ -15,12 +15,12 @@ import signal
 import subprocess
 import sys
 import time
-import traceback
 
 import gi
 
 gi.require_version("Gst", "1.0")
 from gi.repository import Gst  # noqa: E402
+from tap import case, run_cases  # noqa: E402
 
 lftag, work = sys.argv[1:3]
 os.makedirs(work, exist_ok=True)
@@ -29,14 +29,8 @@ Gst.init(None)
 # ours); `lftag` is ours, and every run of it below gets it back.
 if "LFTAG_TOOL_ASAN_OPTIONS" in os.environ:
     os.environ["ASAN_OPTIONS"] = os.environ["LFTAG_TOOL_ASAN_OPTIONS"]
-CASES = []
 FRAMES = 45
 IDS = (6789, 42, 300)
-
-
-def case(function):
-    CASES.append(function)
-    return function
 
 
 def path(name):
@@ -350,8 +344,10 @@ def damage_warnings(stderr):
 
 @case
 def intact_input_has_no_damage():
+    # Without the deadline: under the sanitizers on a loaded machine a frame can outlast it,
+    # and its warning is not about the input.
     for video in (recording(), mjpeg_recording()):
-        result = annotate(video, "--jsonl", path("intact.jsonl"), "--strict")
+        result = annotate(video, "--jsonl", path("intact.jsonl"), "--strict", "--deadline", "0")
         assert damage_warnings(result.stderr) == [] and "damaged" not in result.stderr, result.stderr
 
 
@@ -377,10 +373,12 @@ def truncated_file_is_reported():
 
 @case
 def overwritten_middle_keeps_frame_numbers():
-    intact = [json.loads(line) for line in annotate(mjpeg_recording(), "--jsonl", "-", "-q").stdout.splitlines()]
+    # Without the deadline, so that both runs find the same markers however loaded the machine.
+    intact = [json.loads(line) for line in
+              annotate(mjpeg_recording(), "--jsonl", "-", "-q", "--deadline", "0").stdout.splitlines()]
     assert [line["frame"] for line in intact] == list(range(90))
     video = damaged_copy(mjpeg_recording(), "overwritten.avi", overwrite=(0.4, 0.5))
-    result = annotate(video, "--jsonl", "-")
+    result = annotate(video, "--jsonl", "-", "--deadline", "0")
     lines = [json.loads(line) for line in result.stdout.splitlines()]
     frames = [line["frame"] for line in lines]
     assert 30 < len(lines) < 90, len(lines)
@@ -418,15 +416,4 @@ def missing_decoder_says_what_to_install_first():
     assert "vp8dec" not in lines[0], lines
 
 
-print(f"1..{len(CASES)}")
-failed = 0
-for number, function in enumerate(CASES, 1):
-    try:
-        function()
-        print(f"ok {number} - {function.__name__}", flush=True)
-    except Exception:  # noqa: BLE001 - every failure is reported, then the next case runs
-        failed += 1
-        print(f"not ok {number} - {function.__name__}")
-        for line in traceback.format_exc().splitlines():
-            print("# " + line, flush=True)
-raise SystemExit(1 if failed else 0)
+run_cases()

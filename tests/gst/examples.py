@@ -12,23 +12,17 @@ import socket
 import subprocess
 import sys
 import time
-import traceback
 
 import gi
 
 gi.require_version("Gst", "1.0")
 from gi.repository import Gst  # noqa: E402
+from tap import case, run_cases  # noqa: E402
 
 root, read_meta, work = sys.argv[1:4]
 examples = os.path.join(root, "examples")
 os.makedirs(work, exist_ok=True)
 Gst.init(None)
-CASES = []
-
-
-def case(function):
-    CASES.append(function)
-    return function
 
 
 def path(name):
@@ -163,15 +157,4 @@ def mqtt_cameras_to_one_broker():
         process.wait(timeout=60)
 
 
-print(f"1..{len(CASES)}")
-failed = 0
-for number, function in enumerate(CASES, 1):
-    try:
-        function()
-        print(f"ok {number} - {function.__name__}", flush=True)
-    except Exception:  # noqa: BLE001 - every failure is reported, then the next case runs
-        failed += 1
-        print(f"not ok {number} - {function.__name__}")
-        for line in traceback.format_exc().splitlines():
-            print("# " + line, flush=True)
-raise SystemExit(1 if failed else 0)
+run_cases()

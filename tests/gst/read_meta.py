@@ -3,21 +3,15 @@
 """Reads LFTagTruthMeta and lftagdetect's LFTagMeta and region-of-interest metas from Python
 (PyGObject), as gst/lftag-meta.h and docs/gstreamer.md say one can, after videoconvert and videoscale.
 Reports each case as TAP."""
-import traceback
 
 import gi
 
 gi.require_version("Gst", "1.0")
 gi.require_version("GstVideo", "1.0")
 from gi.repository import GLib, Gst, GstVideo  # noqa: E402
+from tap import case, run_cases  # noqa: E402
 
 Gst.init(None)
-CASES = []
-
-
-def case(function):
-    CASES.append(function)
-    return function
 
 
 def frames(launch, count):
@@ -111,15 +105,4 @@ def region_params():
     assert param is not None and param.get_value("id") == 6789 and param.get_value("id-string") == "6789"
 
 
-print(f"1..{len(CASES)}")
-failed = 0
-for number, function in enumerate(CASES, 1):
-    try:
-        function()
-        print(f"ok {number} - {function.__name__}")
-    except Exception:  # noqa: BLE001 - every failure is reported, then the next case runs
-        failed += 1
-        print(f"not ok {number} - {function.__name__}")
-        for line in traceback.format_exc().splitlines():
-            print("# " + line)
-raise SystemExit(1 if failed else 0)
+run_cases()
