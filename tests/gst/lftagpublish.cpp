@@ -20,6 +20,7 @@
 #include <gst/check/gstharness.h>
 #include <nlohmann/json.hpp>
 
+#include "errors.hpp"
 #include "frames.hpp"
 #include "json.hpp"
 #include "metaconversion.h"
@@ -181,24 +182,6 @@ std::vector<std::string> raw_lines(const std::string& path) {
   return lines;
 }
 
-// An element error: its source, domain, code and message.
-struct Posted {
-  std::string source;
-  GQuark domain = 0;
-  int code = 0;
-  std::string message;
-};
-
-Posted parse_error(GstMessage* m) {
-  fail_unless(m != nullptr && GST_MESSAGE_TYPE(m) == GST_MESSAGE_ERROR, "no error posted");
-  GError* error = nullptr;
-  gst_message_parse_error(m, &error, nullptr);
-  Posted posted{GST_OBJECT_NAME(GST_MESSAGE_SRC(m)), error->domain, error->code, error->message};
-  g_error_free(error);
-  gst_message_unref(m);
-  return posted;
-}
-
 bool has(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 // A harness around lftagpublish writing to `path`, its messages on `bus`, fed frames
@@ -294,24 +277,12 @@ GST_END_TEST;
 
 // A location that cannot be written fails the state change with an error naming it.
 GST_START_TEST(test_unwritable_location) {
-  GstElement* pipeline = gst_parse_launch(
-      "lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p location=/nonexistent-dir/d.jsonl ! fakesink",
-      nullptr);
-  GstBus* bus = gst_element_get_bus(pipeline);
-  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) == GST_STATE_CHANGE_FAILURE);
-  GstMessage* m = gst_bus_pop_filtered(bus, GST_MESSAGE_ERROR);
-  fail_unless(m != nullptr);
-  fail_unless_equals_string(GST_OBJECT_NAME(GST_MESSAGE_SRC(m)), "p");
-  GError* error = nullptr;
-  gst_message_parse_error(m, &error, nullptr);
-  fail_unless(g_error_matches(error, GST_RESOURCE_ERROR, GST_RESOURCE_ERROR_OPEN_WRITE), "%s", error->message);
-  fail_unless(std::string(error->message).find("/nonexistent-dir/d.jsonl") != std::string::npos, "%s",
-              error->message);
-  g_error_free(error);
-  gst_message_unref(m);
-  gst_element_set_state(pipeline, GST_STATE_NULL);
-  gst_object_unref(bus);
-  gst_object_unref(pipeline);
+  const Posted error = start_error(
+      "lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p location=/nonexistent-dir/d.jsonl ! fakesink");
+  fail_unless_equals_string(error.source.c_str(), "p");
+  fail_unless(error.domain == GST_RESOURCE_ERROR && error.code == GST_RESOURCE_ERROR_OPEN_WRITE, "%s",
+              error.message.c_str());
+  fail_unless(has(error.message, "/nonexistent-dir/d.jsonl"), "%s", error.message.c_str());
 }
 GST_END_TEST;
 
@@ -826,14 +797,8 @@ GST_END_TEST;
 #if !LFTAG_HAVE_MQTT
 // A build without libmosquitto: target=mqtt fails the start, saying what to install.
 GST_START_TEST(test_mqtt_needs_libmosquitto) {
-  GstElement* pipeline =
-      gst_parse_launch("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ! fakesink", nullptr);
-  GstBus* bus = gst_element_get_bus(pipeline);
-  fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) == GST_STATE_CHANGE_FAILURE);
-  const Posted error = parse_error(gst_bus_pop_filtered(bus, GST_MESSAGE_ERROR));
-  gst_element_set_state(pipeline, GST_STATE_NULL);
-  gst_object_unref(bus);
-  gst_object_unref(pipeline);
+  const Posted error =
+      start_error("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ! fakesink");
   fail_unless_equals_string(error.source.c_str(), "p");
   fail_unless(has(error.message, "without MQTT") && has(error.message, "libmosquitto-dev") &&
                   has(error.message, "target=file"),

@@ -25,6 +25,7 @@
 
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
+#include "errors.hpp"
 
 namespace {
 
@@ -338,25 +339,11 @@ GST_START_TEST(test_settings_that_cannot_work) {
       {"password=secret", "needs a username"},
   };
   for (const Case& c : cases) {
-    GstElement* pipeline =
-        gst_parse_launch((std::string("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ") +
-                          c.properties + " ! fakesink")
-                             .c_str(),
-                         nullptr);
-    GstBus* bus = gst_element_get_bus(pipeline);
-    fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) == GST_STATE_CHANGE_FAILURE, "%s started",
-                c.properties);
-    GstMessage* m = gst_bus_pop_filtered(bus, GST_MESSAGE_ERROR);
-    fail_unless(m != nullptr, "%s: no error", c.properties);
-    fail_unless_equals_string(GST_OBJECT_NAME(GST_MESSAGE_SRC(m)), "p");
-    GError* error = nullptr;
-    gst_message_parse_error(m, &error, nullptr);
-    fail_unless(std::string(error->message).find(c.says) != std::string::npos, "%s: %s", c.properties, error->message);
-    g_error_free(error);
-    gst_message_unref(m);
-    gst_element_set_state(pipeline, GST_STATE_NULL);
-    gst_object_unref(bus);
-    gst_object_unref(pipeline);
+    const Posted error = start_error(
+        std::string("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ") + c.properties +
+        " ! fakesink");
+    fail_unless_equals_string(error.source.c_str(), "p");
+    fail_unless(error.message.find(c.says) != std::string::npos, "%s: %s", c.properties, error.message.c_str());
   }
 }
 GST_END_TEST;
