@@ -2,63 +2,32 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <future>
+#include <functional>
 #include <random>
-#include <thread>
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
 
 #include "lftag/camera.hpp"
 
+#include "errors.hpp"
+
 using lftag::Camera;
 
 namespace {
 const std::string kData = LFTAG_TEST_DATA;
 
-std::string error_of(const std::string& path) {
-  try {
-    Camera::load(path);
-  } catch (const std::runtime_error& e) {
-    return e.what();
-  }
-  return "";
+// The error Camera::load gives `path` ("" if it loads).
+std::string load_error(const std::string& path) {
+  return error_of([&] { Camera::load(path); });
 }
 
 // The error Camera::parse gives `text` ("" if it loads).
 std::string parse_error(const std::string& text) {
-  try {
-    Camera::parse(text, "inline");
-  } catch (const std::runtime_error& e) {
-    return e.what();
-  }
-  return "";
-}
-
-// Runs `f` on a thread of its own: one that does not return within `seconds` fails the
-// test and ends the program (a hung parser cannot be stopped otherwise).
-std::string error_within(const std::function<void()>& f, int seconds = 20) {
-  auto done = std::make_shared<std::promise<std::string>>();
-  std::future<std::string> result = done->get_future();
-  std::thread([done, f] {
-    try {
-      f();
-      done->set_value("");
-    } catch (const std::runtime_error& e) {
-      done->set_value(e.what());
-    } catch (...) {
-      done->set_value("an exception other than std::runtime_error");
-    }
-  }).detach();
-  if (result.wait_for(std::chrono::seconds(seconds)) != std::future_status::ready) {
-    std::fprintf(stderr, "FATAL: the calibration reader did not return within %d s\n", seconds);
-    std::_Exit(1);
-  }
-  return result.get();
+  return error_of([&] { Camera::parse(text, "inline"); });
 }
 
 std::string write_temp(const std::string& name, const std::string& bytes) {
@@ -85,8 +54,6 @@ std::string json_with(const std::string& entries) {
          entries + "}";
 }
 
-#define EXPECT_MENTIONS(message, needle) \
-  EXPECT_NE(std::string(message).find(needle), std::string::npos) << "'" << (message) << "' lacks '" << (needle) << "'"
 }  // namespace
 
 TEST(Camera, LoadsOpenCvSampleCalibration) {
@@ -108,14 +75,14 @@ TEST(Camera, LoadsGStreamerCameraCalibrateKeys) {
 }
 
 TEST(Camera, ErrorsNameTheFileAndTheProblem) {
-  const std::string missing = error_of(kData + "/does-not-exist.yml");
+  const std::string missing = load_error(kData + "/does-not-exist.yml");
   EXPECT_NE(missing.find("does-not-exist.yml"), std::string::npos);
   EXPECT_NE(missing.find("cannot be opened"), std::string::npos);
-  const std::string malformed = error_of(kData + "/malformed.yml");
+  const std::string malformed = load_error(kData + "/malformed.yml");
   EXPECT_NE(malformed.find("malformed.yml"), std::string::npos);
-  const std::string shape = error_of(kData + "/wrong_shape.yml");
+  const std::string shape = load_error(kData + "/wrong_shape.yml");
   EXPECT_NE(shape.find("expected 3x3"), std::string::npos) << shape;
-  const std::string none = error_of(kData + "/no_matrix.yml");
+  const std::string none = load_error(kData + "/no_matrix.yml");
   EXPECT_NE(none.find("camera_matrix"), std::string::npos) << none;
 }
 
@@ -163,7 +130,7 @@ TEST(Camera, DefaultAndScaledCameras) {
 
 TEST(CameraFile, ReproducersOfOpenCvParserFailures) {
   // A NUL byte in an XML attribute crashed OpenCV's parser.
-  std::string e = error_of(kData + "/nul_byte.xml");
+  std::string e = load_error(kData + "/nul_byte.xml");
   EXPECT_MENTIONS(e, "nul_byte.xml");
   EXPECT_MENTIONS(e, "NUL byte");
   // OpenCV's YAML parser never returned on this.
@@ -173,7 +140,7 @@ TEST(CameraFile, ReproducersOfOpenCvParserFailures) {
   e = error_within([] { Camera::parse("%YAML:1.0\na: 1\n...-. ]", "inline"); });
   EXPECT_MENTIONS(e, "inline: it is not valid YAML");
   // 10^16 elements: refused by their count before anything is allocated.
-  e = error_of(kData + "/huge_matrix.yml");
+  e = load_error(kData + "/huge_matrix.yml");
   EXPECT_MENTIONS(e, "huge_matrix.yml");
   EXPECT_MENTIONS(e, "is 100000000x100000000, expected 3x3");
   e = parse_error(yaml_with(kGoodK, "distortion_coefficients: !!opencv-matrix\n   rows: 100000000\n   cols: "
@@ -391,7 +358,7 @@ TEST(CameraFile, SizeLimit) {
   std::string big = yaml_with(kGoodK, "# ");
   big.resize((1 << 20) + 1, 'x');
   const std::string path = write_temp("big.yml", big);
-  std::string e = error_of(path);
+  std::string e = load_error(path);
   EXPECT_MENTIONS(e, "big.yml");
   EXPECT_MENTIONS(e, "larger than the 1048576 bytes (1 MiB)");
   EXPECT_MENTIONS(parse_error(big), "more than the 1048576 (1 MiB)");
@@ -402,10 +369,10 @@ TEST(CameraFile, SizeLimit) {
 
 TEST(CameraFile, BrokenFilesOfEveryFormat) {
   // Empty, blank, not a mapping, wrong types.
-  EXPECT_MENTIONS(error_of(write_temp("empty.yml", "")), "empty.yml': it is empty");
+  EXPECT_MENTIONS(load_error(write_temp("empty.yml", "")), "empty.yml': it is empty");
   EXPECT_MENTIONS(parse_error(" \n\t\n"), "it is empty");
   EXPECT_MENTIONS(parse_error("%YAML:1.0\n"), "it is empty");
-  EXPECT_MENTIONS(error_of(testing::TempDir()), "is a directory");
+  EXPECT_MENTIONS(load_error(testing::TempDir()), "is a directory");
   EXPECT_MENTIONS(parse_error("%YAML:1.0\n- 1\n- 2\n"), "top level is not a mapping");
   EXPECT_MENTIONS(parse_error("%YAML:2.0\ncamera_matrix: 1\n"), "not an OpenCV YAML header");
   EXPECT_MENTIONS(parse_error("[1, 2]"), "top level is not a mapping");

@@ -2,13 +2,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <chrono>
 #include <cstdio>
 #include <fstream>
-#include <functional>
-#include <future>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -16,6 +12,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "lftag/image_file.hpp"
+
+#include "errors.hpp"
 
 using namespace lftag;
 
@@ -39,35 +37,7 @@ void put_le32(std::vector<unsigned char>& b, std::size_t at, unsigned v) { put_l
 
 // The message read_grey_image refuses `path` with ("" if it reads it).
 std::string refusal(const std::string& path) {
-  try {
-    read_grey_image(path);
-  } catch (const std::runtime_error& e) {
-    return e.what();
-  }
-  return "";
-}
-
-#define EXPECT_MENTIONS(message, needle) \
-  EXPECT_NE(std::string(message).find(needle), std::string::npos) << "'" << (message) << "' lacks '" << (needle) << "'"
-
-// Runs `f` on a thread of its own: one that does not return within 20 s (a reader blocked
-// on a FIFO) fails the test and ends the program, which could not stop it otherwise.
-std::string error_within(const std::function<void()>& f) {
-  auto done = std::make_shared<std::promise<std::string>>();
-  std::future<std::string> result = done->get_future();
-  std::thread([done, f] {
-    try {
-      f();
-      done->set_value("");
-    } catch (const std::runtime_error& e) {
-      done->set_value(e.what());
-    }
-  }).detach();
-  if (result.wait_for(std::chrono::seconds(20)) != std::future_status::ready) {
-    std::fprintf(stderr, "FATAL: the image reader did not return within 20 s\n");
-    std::_Exit(1);
-  }
-  return result.get();
+  return error_of([&] { read_grey_image(path); });
 }
 
 // One TIFF image file directory entry of a single number, held in the entry.
