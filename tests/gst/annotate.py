@@ -21,6 +21,7 @@ import gi
 gi.require_version("Gst", "1.0")
 from gi.repository import Gst  # noqa: E402
 from tap import case, run_cases  # noqa: E402
+from videos import decoded  # noqa: E402
 
 lftag, work = sys.argv[1:3]
 os.makedirs(work, exist_ok=True)
@@ -88,30 +89,6 @@ def recording():
         run_to_eos(pipeline)
         TRUTH["frames"] = frames
     return video
-
-
-def decoded(video):
-    """Width, height and number of frames of a video file, decoded, and its video caps
-    before decoding (the codec)."""
-    pipeline = Gst.parse_launch("filesrc name=in ! parsebin name=parse ! decodebin ! videoconvert ! "
-                                "appsink name=out sync=false")
-    pipeline.get_by_name("in").set_property("location", video)
-    codecs = []
-
-    def on_pad(element, pad):
-        caps = pad.get_current_caps() or pad.query_caps(None)
-        codecs.append(caps.get_structure(0).get_name())
-
-    pipeline.get_by_name("parse").connect("pad-added", on_pad)
-    sink = pipeline.get_by_name("out")
-    pipeline.set_state(Gst.State.PLAYING)
-    frames, size = 0, None
-    while (sample := sink.emit("try-pull-sample", 60 * Gst.SECOND)) is not None:
-        s = sample.get_caps().get_structure(0)
-        size = (s.get_value("width"), s.get_value("height"))
-        frames += 1
-    pipeline.set_state(Gst.State.NULL)
-    return size, frames, codecs
 
 
 def check_jsonl(lines):

@@ -18,6 +18,7 @@ import gi
 gi.require_version("Gst", "1.0")
 from gi.repository import Gst  # noqa: E402
 from tap import case, run_cases  # noqa: E402
+from videos import decoded  # noqa: E402
 
 root, read_meta, work = sys.argv[1:4]
 examples = os.path.join(root, "examples")
@@ -41,21 +42,6 @@ def python(script, *args, expect=0):
     return run(sys.executable, os.path.join(examples, script), *args, expect=expect)
 
 
-def decoded_frames(video):
-    """Width, height and number of frames of a video file, decoded."""
-    pipeline = Gst.parse_launch("filesrc name=in ! decodebin ! videoconvert ! appsink name=out sync=false")
-    pipeline.get_by_name("in").set_property("location", video)
-    sink = pipeline.get_by_name("out")
-    pipeline.set_state(Gst.State.PLAYING)
-    frames, size = 0, None
-    while (sample := sink.emit("try-pull-sample", 60 * Gst.SECOND)) is not None:
-        s = sample.get_caps().get_structure(0)
-        size = (s.get_value("width"), s.get_value("height"))
-        frames += 1
-    pipeline.set_state(Gst.State.NULL)
-    return size, frames
-
-
 def recording():
     """A recorded video of two 3x3 markers, 6789 and 42: 30 frames at 640x480, VP8."""
     video = path("recording.webm")
@@ -73,13 +59,13 @@ def launch_line_screen():
 @case
 def launch_line_testsrc_to_file():
     run(os.path.join(examples, "pipelines.sh"), "testsrc-to-file", path("testsrc.webm"), env={"FRAMES": "20"})
-    assert decoded_frames(path("testsrc.webm")) == ((1280, 720), 20)
+    assert decoded(path("testsrc.webm"))[:2] == ((1280, 720), 20)
 
 
 @case
 def launch_line_file_to_file():
     run(os.path.join(examples, "pipelines.sh"), "file-to-file", recording(), path("annotated.webm"))
-    assert decoded_frames(path("annotated.webm")) == ((640, 480), 30)
+    assert decoded(path("annotated.webm"))[:2] == ((640, 480), 30)
     run(os.path.join(examples, "pipelines.sh"), "file-to-file", path("missing.webm"), path("x.webm"), expect=1)
 
 
@@ -116,7 +102,7 @@ def score_testsrc():
     assert set(rows) == {"3x3", "4x4", "all"}, result.stdout
     frames, visible, found, rate, wrong = rows["all"][1], rows["all"][2], rows["all"][3], rows["all"][4], rows["all"][6]
     assert frames == "40" and wrong == "0" and int(visible) >= 100 and float(rate) >= 95, result.stdout
-    assert decoded_frames(path("scored.webm")) == ((640, 480), 40)
+    assert decoded(path("scored.webm"))[:2] == ((640, 480), 40)
     python("score-testsrc.py", "--families", "3x3,10x10", expect=2)
 
 
