@@ -4,9 +4,8 @@
 // edge) tilted 0 to 60 degrees from the line of sight, about an axis and with a roll at
 // random, anywhere in a 640x480 frame of a camera with fx = 500 (65 degrees across). Each
 // system's chosen pose and its other solution are compared with the truth; a choice is
-// wrong when the other solution is nearer the truth by more than kMargin (face on, the
-// two are mirror tilts about the line of sight and about as near; the flip of a marker
-// tilted t degrees is about 2t off). AprilTag's pose is OpenCV's IPPE for squares on its
+// wrong when the other solution is nearer the truth (trial.hpp's wrong_choice; the flip of
+// a marker tilted t degrees is about 2t off). AprilTag's pose is OpenCV's IPPE for squares on its
 // four corners (`ippe-corners`, every other experiment's) or the library's own
 // estimate_tag_pose (`estimate-tag-pose`); both give two solutions. LFTag runs each of
 // its choice rules on the same frames: `default`, `centroids` (shape_choice_ratio 0) and
@@ -14,7 +13,7 @@
 // ratio below which the shapes decide can be chosen from one run. The trials are split
 // into a tuning set and a validation set with other poses and marker ids, and each frame
 // is seen clean and as a webcam would give it (kConditions). A wrong choice
-// more than kFlip off is a flip: what makes the z axis jump.
+// more than kFlipDeg off is a flip: what makes the z axis jump.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -36,8 +35,6 @@ namespace bench {
 namespace {
 
 constexpr double kTagSize = 0.1;  // metres; only the poses' scale depends on it
-constexpr double kMargin = 1;     // degrees the other solution must be nearer for a wrong choice
-constexpr double kFlip = 10;      // degrees off beyond which a wrong choice is also counted as a flip
 // The ambiguity ratios' bins of ambiguity_ratios.csv: where a system's ratio says its choice is safe.
 const std::vector<double> kRatioBins{0, 1.1, 1.5, 2, 3};
 const char* const kSets[2] = {"tuning", "validation"};
@@ -92,10 +89,6 @@ std::vector<Rule> rules_for(const std::string& name) {
   rules.push_back({"centroids", std::make_unique<LftagSystem>(n, centroids)});
   rules.push_back({"shapes", std::make_unique<LftagSystem>(n, shapes)});
   return rules;
-}
-
-bool wrong_choice(const Outcome& o) {
-  return o.found && o.rotation_error_deg > o.alternative_rotation_error_deg + kMargin;
 }
 
 struct Trial {
@@ -179,7 +172,7 @@ bool run_ambiguity(const Options& options) {
       std::map<std::tuple<int, int, std::size_t>, Tally> by_ratio;  // condition, set, ratio bin
       for (const Trial& t : trials[s]) {
         const Outcome& o = t.outcomes[r];
-        const bool wrong = wrong_choice(o), flip = wrong && o.rotation_error_deg > kFlip;
+        const bool wrong = wrong_choice(o), flip = flipped(o);
         if (o.found && std::isfinite(o.ambiguity_ratio)) {
           std::size_t bin = 0;
           while (bin + 1 < kRatioBins.size() && o.ambiguity_ratio >= kRatioBins[bin + 1]) ++bin;

@@ -51,6 +51,16 @@ struct Outcome {
   double ambiguity_ratio = kNaN;                 // the system's, when given
 };
 
+// The planar pose's choice between its two solutions was wrong: the other one is nearer
+// the truth by more than kWrongChoiceMargin degrees (face on, the two are mirror tilts
+// about the line of sight and about as near). A wrong choice more than kFlipDeg off is a
+// flip: what makes the z axis jump.
+constexpr double kWrongChoiceMargin = 1, kFlipDeg = 10;
+inline bool wrong_choice(const Outcome& o) {
+  return o.found && o.rotation_error_deg > o.alternative_rotation_error_deg + kWrongChoiceMargin;
+}
+inline bool flipped(const Outcome& o) { return wrong_choice(o) && o.rotation_error_deg > kFlipDeg; }
+
 // Mean projected edge of the tag (outer border) in pixels.
 double edge_px(const lftag::Camera& camera, const Pose& pose, double tag_size);
 

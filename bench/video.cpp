@@ -3,8 +3,9 @@
 // 1280x720, four per frame, moving smoothly through one-second clips (30 frames), seen in
 // perspective with camera shake, defocus, uneven light, exposure drift, sensor noise and
 // JPEG compression. Every system sees the same clips, poses, frames and conditions; only
-// the marker design differs. Recall, wrong detections and pose error per system, overall
-// and by projected edge and by tilt.
+// the marker design differs. Recall, wrong detections, pose error and wrong choices of the
+// planar pose's two solutions (trial.hpp's wrong_choice) per system, overall and by
+// projected edge and by tilt.
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -233,6 +234,8 @@ struct Seen {
   bool found = false;
   int wrong = 0;  // wrong detections in the frame whose centre is nearest this marker
   double rotation_deg = kNaN, translation_m = kNaN, depth_m = kNaN;
+  double alternative_rotation_deg = kNaN;  // of the planar pose's other solution
+  bool wrong_choice = false, flip = false;  // trial.hpp's
 };
 
 // The same slot carries the same marker through a clip; ids repeat after kIds slots.
@@ -360,6 +363,9 @@ bool run_video(const Options& options) {
           out[m].rotation_deg = o.rotation_error_deg;
           out[m].translation_m = o.translation_error_m;
           out[m].depth_m = o.depth_error_m;
+          out[m].alternative_rotation_deg = o.alternative_rotation_error_deg;
+          out[m].wrong_choice = wrong_choice(o);
+          out[m].flip = flipped(o);
         }
         if (!options.save_misses.empty() && std::any_of(out.begin(), out.end(), [](const Seen& o) { return !o.found; }))
           save_miss(options.save_misses, options.systems[s], jobs[j], image, centers, out);
@@ -396,14 +402,16 @@ bool run_video(const Options& options) {
   }
   Csv markers_csv(options.out / "video.csv",
                   {"system", "family", "clip", "frame", "marker", "id", "edge_px", "tilt_deg", "distance_m", "found",
-                   "wrong", "translation_error_m", "translation_error_pct", "depth_error_pct", "rotation_error_deg"});
+                   "wrong", "translation_error_m", "translation_error_pct", "depth_error_pct", "rotation_error_deg",
+                   "alternative_rotation_error_deg", "wrong_choice"});
   Csv summary_csv(options.out / "video_summary.csv",
                   {"system", "family", "bin_kind", "bin", "markers", "found", "recall_pct", "wrong", "with_pose",
-                   "median_translation_pct", "p90_translation_pct", "median_rotation_deg"});
+                   "median_translation_pct", "p90_translation_pct", "median_rotation_deg", "wrong_choices",
+                   "flips"});
   Csv counters_csv(options.out / "video_counters.csv", {"system", "frames", "counter", "value"});
   // Tallies per bin: "all", then the edge bins, then the tilt bins.
   struct Tally {
-    int markers = 0, found = 0, wrong = 0;
+    int markers = 0, found = 0, wrong = 0, wrong_choices = 0, flips = 0;
     std::vector<double> translation_pct, rotation_deg;
   };
   const int edge_bins = int(kEdgeBins.size()) - 1, tilt_bins = int(kTiltBins.size()) - 1;
@@ -417,12 +425,15 @@ bool run_video(const Options& options) {
         const double relative = 100 * o.translation_m / t.distance;
         markers_csv.row(name, families[s], jobs[j].clip, jobs[j].frame, m,
                         marker_id(ids[s], jobs[j].clip, m), t.edge, t.tilt, t.distance,
-                        int(o.found), o.wrong, o.translation_m, relative, 100 * o.depth_m / t.distance, o.rotation_deg);
+                        int(o.found), o.wrong, o.translation_m, relative, 100 * o.depth_m / t.distance, o.rotation_deg,
+                        o.alternative_rotation_deg, int(o.wrong_choice));
         for (int b : {0, 1 + bin_of(kEdgeBins, t.edge), 1 + edge_bins + bin_of(kTiltBins, t.tilt)}) {
           Tally& k = tally[b];
           ++k.markers;
           k.found += o.found;
           k.wrong += o.wrong;
+          k.wrong_choices += o.wrong_choice;
+          k.flips += o.flip;
           if (o.found && std::isfinite(o.rotation_deg) && std::isfinite(relative)) {
             k.translation_pct.push_back(relative);
             k.rotation_deg.push_back(o.rotation_deg);
@@ -437,7 +448,8 @@ bool run_video(const Options& options) {
           b == 0 ? "all" : edge ? bin_name(kEdgeBins, b - 1) : bin_name(kTiltBins, b - 1 - edge_bins);
       summary_csv.row(name, families[s], kind, bin, k.markers, k.found,
                       k.markers ? 100.0 * k.found / k.markers : kNaN, k.wrong, int(k.translation_pct.size()),
-                      quantile(k.translation_pct, 0.5), quantile(k.translation_pct, 0.9), quantile(k.rotation_deg, 0.5));
+                      quantile(k.translation_pct, 0.5), quantile(k.translation_pct, 0.9), quantile(k.rotation_deg, 0.5),
+                      k.wrong_choices, k.flips);
     }
     for (const auto& [counter, value] : counters[s]) counters_csv.row(name, int(jobs.size()), counter, value);
   }
