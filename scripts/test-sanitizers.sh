@@ -29,7 +29,7 @@ fi
 if [ -z "$only" ] || [ "$only" = thread ]; then
   if [ ! -f build-tsan/build.ninja ]; then
     meson setup build-tsan -Dbuildtype=debugoptimized -Db_ndebug=true -Db_sanitize=thread -Db_lundef=false \
-      -Dbench=disabled || exit 2
+      -Dbench=disabled ${LFTAG_WERROR:+-Dwerror=true} || exit 2
   fi
   rm -f build-tsan/meson-logs/testlog.*
   ninja -C build-tsan tests/lib/test_threads tests/gst/gst_threads gst/libgstlftag.so || exit 2
