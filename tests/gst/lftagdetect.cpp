@@ -1789,6 +1789,12 @@ struct TrackingRun {
   GstBus* bus;
   GstVideoInfo info;
   lftag::SceneRenderer renderer{lftag::SceneParams{}};
+  lftag::SceneRenderer smeared{[] {
+    lftag::SceneParams p;
+    p.blur_length_px = 60;  // a shake of the camera: far more than the outline reading reads through
+    p.blur_angle_deg = 90;
+    return p;
+  }()};
   int frame = 0;
 
   explicit TrackingRun(const std::string& properties) {
@@ -1804,12 +1810,14 @@ struct TrackingRun {
     gst_object_unref(bus);
     gst_harness_teardown(h);
   }
-  // The meta of the next frame, holding `markers` (none at all when `blank`).
-  FrameDetections push(const std::vector<lftag::SceneMarker>& markers, bool blank = false) {
+  enum Spoil { none, blank, blur };
+  // The meta of the next frame, holding `markers` (none at all when `blank`, smeared past
+  // reading when `blur`).
+  FrameDetections push(const std::vector<lftag::SceneMarker>& markers, Spoil spoil = none) {
     std::vector<lftag::SceneTarget> targets;
     for (const lftag::SceneMarker& m : markers) targets.push_back(lftag::to_target(m));
-    cv::Mat1b image = renderer.render(targets);
-    if (blank) image.setTo(128);
+    cv::Mat1b image = (spoil == blur ? smeared : renderer).render(targets);
+    if (spoil == blank) image.setTo(128);
     GstBuffer* buffer = gst_buffer_new_allocate(nullptr, GST_VIDEO_INFO_SIZE(&info), nullptr);
     GstMapInfo map;
     gst_buffer_map(buffer, &map, GST_MAP_WRITE);
@@ -1853,16 +1861,19 @@ void free_structures(std::vector<GstStructure*>& structures) {
 
 }  // namespace
 
-// A marker blanked out for one frame stays in the meta, predicted near where it is, with
-// its id and track; without tracking that frame has no marker. In on-change mode the
-// track's start is the only message (without tracking the gap posts two more).
+// A marker blanked or blurred out of detection for one frame stays in the meta,
+// predicted near where it is, with its id and track; without tracking that frame has no
+// marker. In on-change mode the track's start is the only message (without tracking the
+// gap posts two more).
 GST_START_TEST(test_tracking_predicts_a_missed_frame) {
-  for (const bool tracking : {true, false}) {
+  using Case = std::pair<TrackingRun::Spoil, bool>;  // how the frame is spoilt, and tracking
+  for (const auto& [spoil, tracking] : {Case{TrackingRun::blank, true}, Case{TrackingRun::blank, false},
+                                        Case{TrackingRun::blur, true}, Case{TrackingRun::blur, false}}) {
     TrackingRun run(std::string("messages=on-change tracking=") + (tracking ? "true" : "false"));
     guint64 track_id = 0;
     for (int f = 0; f < 10; ++f) {
       const lftag::SceneMarker marker = tracked_marker(1234, -0.5 + 0.04 * f);
-      const FrameDetections found = run.push({marker}, f == 5);
+      const FrameDetections found = run.push({marker}, f == 5 ? spoil : TrackingRun::none);
       if (!tracking) {
         fail_unless_equals_int(found.detections.size(), f == 5 ? 0 : 1);
         fail_unless(found.tracks.size() == found.detections.size() && (found.tracks.empty() || !found.tracks[0]),
