@@ -71,7 +71,8 @@ std::vector<std::string> difference(const std::vector<std::string>& a, const std
 std::string marker_key(const Family& family, const TagId& id) { return family.name() + ":" + id.to_decimal(); }
 
 GstMessage* DetectMessages::frame(GstObject* source, GstLFTagDetectMessages mode, bool full, const GstSegment& segment,
-                                  GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections) {
+                                  GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections,
+                                  const std::vector<TrackInfo>* tracks) {
   std::vector<std::string> ids; /* in the detections' order */
   for (const Detection& d : detections) ids.push_back(marker_key(d.family, d.id));
   std::vector<std::string> seen = ids;
@@ -98,11 +99,25 @@ GstMessage* DetectMessages::frame(GstObject* source, GstLFTagDetectMessages mode
                                       G_TYPE_UINT64, gst_segment_to_running_time(&segment, GST_FORMAT_TIME, pts),
                                       "duration", G_TYPE_UINT64, GST_BUFFER_DURATION(buffer), nullptr);
   set_strings(s, "ids", ids);
+  if (tracks) {
+    GValue list = G_VALUE_INIT;
+    gst_value_array_init(&list, guint(tracks->size()));
+    std::vector<std::string> states;
+    for (const TrackInfo& t : *tracks) {
+      GValue v = G_VALUE_INIT;
+      g_value_init(&v, G_TYPE_UINT64);
+      g_value_set_uint64(&v, t.id);
+      gst_value_array_append_and_take_value(&list, &v);
+      states.push_back(track_state_name(t.state));
+    }
+    gst_structure_take_value(s, "track-ids", &list);
+    set_strings(s, "track-states", states);
+  }
   set_centers(s, "centers", detections);
   set_strings(s, "appeared", appeared);
   set_strings(s, "vanished", vanished);
   gst_structure_set(s, "width", G_TYPE_INT, width, "height", G_TYPE_INT, height, nullptr);
-  if (full) set_detections(s, LFTAG_META_FIELD_DETECTIONS, detections);
+  if (full) set_detections(s, LFTAG_META_FIELD_DETECTIONS, detections, tracks);
   return gst_message_new_element(source, s);
 }
 

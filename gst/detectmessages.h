@@ -10,6 +10,7 @@
 #include <gst/gst.h>
 
 #include <lftag/detector.hpp>
+#include <lftag/tracker.hpp>
 
 G_BEGIN_DECLS
 
@@ -45,9 +46,12 @@ class DetectMessages {
    * with `full`, the whole detections at its end (message-detections). Every
    * analysed frame must come through here, whatever the mode, so that
    * "on-change" and the "appeared" and "vanished" fields compare with the frame
-   * just before. */
+   * just before. With `tracks` (tracking: one per detection, predicted markers
+   * included, so that on-change posts when a track starts or is lost), the message
+   * also holds "track-ids" and "track-states" beside "ids". */
   GstMessage* frame(GstObject* source, GstLFTagDetectMessages mode, bool full, const GstSegment& segment,
-                    GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections);
+                    GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections,
+                    const std::vector<TrackInfo>* tracks = nullptr);
   /* A new stream: nothing was seen before. */
   void reset() { previous_.clear(); }
 

@@ -51,16 +51,17 @@ cv::Rect bounding_box(const Detection& d, int width, int height) {
   return cv::Rect(left, top, std::max(0, right - left + 1), std::max(0, bottom - top + 1));
 }
 
-void attach_detections(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections) {
+void attach_detections(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections,
+                       const std::vector<TrackInfo>* tracks) {
   const gint first_id = clear_metas(buffer);
-  add_detection_meta(buffer, width, height, detections);
+  add_detection_meta(buffer, width, height, detections, true, tracks);
   for (std::size_t i = 0; i < detections.size(); ++i) {
     const cv::Rect box = bounding_box(detections[i], width, height);
     GstVideoRegionOfInterestMeta* roi =
         gst_buffer_add_video_region_of_interest_meta(buffer, "lftag", box.x, box.y, box.width, box.height);
     roi->id = first_id + gint(i);
     roi->parent_id = -1;
-    GstStructure* param = detection_structure(detections[i]);
+    GstStructure* param = detection_structure(detections[i], tracks ? &(*tracks)[i] : nullptr);
     gst_structure_set_name(param, "lftag");
     gst_video_region_of_interest_meta_add_param(roi, param);
   }

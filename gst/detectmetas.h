@@ -9,6 +9,7 @@
 #include <opencv2/core.hpp>
 
 #include <lftag/detector.hpp>
+#include <lftag/tracker.hpp>
 
 namespace lftag::gst {
 
@@ -16,8 +17,10 @@ namespace lftag::gst {
 cv::Rect bounding_box(const Detection& detection, int width, int height);
 
 /* Replaces the LFTagMeta and "lftag" region metas of a writable buffer with those of
- * `detections` (region ids numbered on from the buffer's other regions). */
-void attach_detections(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections);
+ * `detections` (region ids numbered on from the buffer's other regions); `tracks`, when
+ * given, holds each detection's track. */
+void attach_detections(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections,
+                       const std::vector<TrackInfo>* tracks = nullptr);
 
 /* The same for a frame passed on without analysis: an LFTagMeta with "analysed" FALSE
  * and no detections, and no regions. */

@@ -44,6 +44,9 @@
  * - "appeared", "vanished" (#GstValueArray of strings): ids not in the frame
  *   before, and ids of the frame before that are gone (sorted)
  * - "width", "height" (#gint): the analysed frame
+ * - "track-ids" (#GstValueArray of guint64), "track-states" (#GstValueArray of
+ *   strings, "measured" or "predicted"): only with #GstLFTagDetect:tracking, the
+ *   track of each marker, in the order of "ids"
  * - "detections" (#GstValueArray of #GstStructure): as in the LFTagMeta; only
  *   with #GstLFTagDetect:message-detections (about 2.3 KB a marker: a message
  *   with four markers is 0.4 KB without them, 9.7 KB with them)
@@ -52,6 +55,14 @@
  * centroids, corners, pose, the decoding's quality measures and the pose's other
  * solution), with their types and units, are documented once, in lftag-meta.h,
  * which also names each of them with a #define.
+ *
+ * With #GstLFTagDetect:tracking each marker is tracked by its family and id: its
+ * detection gets the track's fields (track-id, track-state, track-age, first-seen,
+ * last-seen, pose-flipped; lftag-meta.h), and a marker missed in a frame stays in the
+ * meta, region metas and messages as "predicted" (moved by the track's
+ * constant-velocity model) until #GstLFTagDetect:lost-after seconds have passed, so
+ * that on-change messages post when a track starts or is lost. With
+ * #GstLFTagDetect:smoothing a One Euro filter's pose is published beside the raw one.
  *
  * Poses need the camera: #GstLFTagDetect:calibration-file (OpenCV YAML, XML or
  * JSON, scaled to the frame when it records its own frame size) or
@@ -77,6 +88,10 @@
  *     lftagdetect overlay=outline+id ! videoconvert ! vp8enc ! webmmux ! \
  *     filesink location=annotated.webm
  * ]| A recorded video annotated into a WebM file.
+ * |[
+ * gst-launch-1.0 -m lftagtestsrc count=3 ! lftagdetect tracking=true lost-after=0.3 \
+ *     messages=on-change ! fakesink
+ * ]| A message when a marker's track starts and when it is lost.
  */
 #include "gstlftagdetect.h"
 
@@ -94,6 +109,7 @@
 
 #include <lftag/detector.hpp>
 #include <lftag/draw.hpp>
+#include <lftag/tracker.hpp>
 
 #include "detectmessages.h"
 #include "detectmetas.h"
@@ -129,6 +145,11 @@ enum {
   PROP_LATE_FRAMES,
   PROP_MAX_CANDIDATES,
   PROP_DEADLINE,
+  PROP_TRACKING,
+  PROP_LOST_AFTER,
+  PROP_SMOOTHING,
+  PROP_SMOOTHING_MIN_CUTOFF,
+  PROP_SMOOTHING_BETA,
 };
 
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
@@ -141,6 +162,8 @@ enum {
 #define DEFAULT_PROP_MESSAGES GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS
 #define DEFAULT_PROP_MESSAGE_DETECTIONS FALSE
 #define DEFAULT_PROP_LATE_FRAMES GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE
+#define DEFAULT_PROP_TRACKING FALSE
+/* The tracker's own parameters default to the library's (TrackerParams). */
 /* The detector's own parameters default to the library's (DetectorParams). */
 
 #define DETECT_FORMATS                                                            \
@@ -216,6 +239,8 @@ struct Settings {
   GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
   bool message_detections = DEFAULT_PROP_MESSAGE_DETECTIONS;
   GstLFTagDetectLateFrames late_frames = DEFAULT_PROP_LATE_FRAMES;
+  bool tracking = DEFAULT_PROP_TRACKING;
+  lftag::TrackerParams tracker;
 
   Settings() {
     const lftag::DetectorParams defaults;
@@ -248,6 +273,8 @@ struct State {
   bool warned_budget = false;        /* the first frame the budget cut */
   bool warned_layout = false;        /* the first frame whose planes lie outside its memory */
   bool warned_deadline = false;      /* the first frame the deadline cut */
+  std::optional<lftag::Tracker> tracker; /* with tracking: the stream's tracks */
+  double track_time = 0;                 /* seconds: the last tracked frame's time */
 };
 
 /* Downstream's latest QoS report: frames due before `earliest` (running time) are
@@ -515,6 +542,44 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                           "frame's own candidates are always examined. The first frame cut posts a warning. 0: no "
                           "deadline (every frame gets all its work, as in lftag::Detector)",
                           0, 1e7, lftag::kLiveDeadlineMs, playing));
+  static const lftag::TrackerParams track_defaults;
+  g_object_class_install_property(
+      gobject_class, PROP_TRACKING,
+      g_param_spec_boolean("tracking", "Tracking",
+                           "Track each marker (by family and id) from frame to frame: the meta, JSON and "
+                           "messages then carry its track (track-id, track-state, track-age, first-seen, "
+                           "last-seen), a marker missed in a frame stays in them as \"predicted\" (moved by "
+                           "the track's constant-velocity model) until lost-after has passed, and an ambiguous "
+                           "pose takes the solution nearer the track's rotation. Switching it off ends every track",
+                           DEFAULT_PROP_TRACKING, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_LOST_AFTER,
+      g_param_spec_double("lost-after", "Lost after (s)",
+                          "With tracking: seconds of buffer time a marker may go undetected and still be "
+                          "reported, as predicted; once longer unseen its track is lost (on-change messages "
+                          "then post it as vanished) and the marker seen again starts a new track. 0: lost in "
+                          "the first frame it is missed",
+                          0.0, 3600.0, track_defaults.lost_after, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_SMOOTHING,
+      g_param_spec_boolean("smoothing", "Smoothing",
+                           "With tracking: a One Euro filter on each track's pose, published as smoothed-rvec "
+                           "and smoothed-tvec beside the raw rvec and tvec (see smoothing-min-cutoff and "
+                           "smoothing-beta)",
+                           track_defaults.smoothing, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_SMOOTHING_MIN_CUTOFF,
+      g_param_spec_double("smoothing-min-cutoff", "Smoothing minimum cutoff (Hz)",
+                          "The One Euro filter's cutoff frequency for a still marker, in hertz: lower smooths "
+                          "more and lags more (about 1 / (2 pi cutoff) seconds: 0.16 s at 1 Hz)",
+                          0.001, 1000.0, track_defaults.min_cutoff, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_SMOOTHING_BETA,
+      g_param_spec_double("smoothing-beta", "Smoothing beta",
+                          "How fast the One Euro filter's cutoff rises with the marker's speed (hertz per "
+                          "metre per second of translation, per unit quaternion per second of rotation): "
+                          "higher lags less behind a moving marker. 0: a fixed cutoff",
+                          0.0, 1e6, track_defaults.beta, playing));
 
   gst_element_class_set_static_metadata(element_class, "LFTag detector", "Filter/Analyzer/Video",
                                         "Finds LFTag fiducial markers, decodes their ids and estimates their poses. "
@@ -663,6 +728,11 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
     case PROP_MAX_CELL_RESIDUAL: s.detector.max_cell_residual = g_value_get_double(value); break;
     case PROP_MAX_CANDIDATES: s.detector.max_candidates = g_value_get_int(value); break;
     case PROP_DEADLINE: s.detector.deadline_ms = g_value_get_double(value); break;
+    case PROP_TRACKING: s.tracking = g_value_get_boolean(value); break;
+    case PROP_LOST_AFTER: s.tracker.lost_after = g_value_get_double(value); break;
+    case PROP_SMOOTHING: s.tracker.smoothing = g_value_get_boolean(value); break;
+    case PROP_SMOOTHING_MIN_CUTOFF: s.tracker.min_cutoff = g_value_get_double(value); break;
+    case PROP_SMOOTHING_BETA: s.tracker.beta = g_value_get_double(value); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
   GST_OBJECT_UNLOCK(self);
@@ -697,6 +767,11 @@ static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue
     case PROP_MAX_CELL_RESIDUAL: g_value_set_double(value, s.detector.max_cell_residual); break;
     case PROP_MAX_CANDIDATES: g_value_set_int(value, s.detector.max_candidates); break;
     case PROP_DEADLINE: g_value_set_double(value, s.detector.deadline_ms); break;
+    case PROP_TRACKING: g_value_set_boolean(value, s.tracking); break;
+    case PROP_LOST_AFTER: g_value_set_double(value, s.tracker.lost_after); break;
+    case PROP_SMOOTHING: g_value_set_boolean(value, s.tracker.smoothing); break;
+    case PROP_SMOOTHING_MIN_CUTOFF: g_value_set_double(value, s.tracker.min_cutoff); break;
+    case PROP_SMOOTHING_BETA: g_value_set_double(value, s.tracker.beta); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
   GST_OBJECT_UNLOCK(self);
@@ -723,6 +798,7 @@ static gboolean gst_lftag_detect_start(GstBaseTransform* trans) {
   self->lateness = {GST_CLOCK_TIME_NONE, 1.0};
   GST_OBJECT_UNLOCK(self);
   st.messages.reset();
+  st.tracker.reset();
   if (!lftag::gst::no_refused_values(GST_ELEMENT(self),
                                      {&s.families_error, &s.distortion_error, &s.cx_error, &s.cy_error}))
     return FALSE;
@@ -747,6 +823,7 @@ static gboolean gst_lftag_detect_stop(GstBaseTransform* trans) {
   st.luma.release();
   st.overlay.reset();
   st.ask_downstream = true;
+  st.tracker.reset();
   return TRUE;
 }
 
@@ -1002,6 +1079,35 @@ static void gst_lftag_detect_skip_late(GstLFTagDetect* self, GstBuffer* buffer, 
                    GST_STIME_ARGS(jitter), GST_TIME_ARGS(pts));
 }
 
+/* Tracking: the frame's detections become the tracked markers (measured ones, then
+ * the predicted ones), `tracks` their tracks. The time is the buffer's timestamp (one
+ * going back, as after a seek, starts over; a gap longer than lost-after loses every
+ * track); a buffer without one comes its duration, or 1/30 s, after the last. */
+static void gst_lftag_detect_track(GstLFTagDetect* self, const Settings& s, GstBuffer* buffer,
+                                   std::vector<Detection>& detections, std::vector<lftag::TrackInfo>& tracks) {
+  State& st = *self->state;
+  if (!st.tracker)
+    st.tracker.emplace(s.tracker);
+  else
+    st.tracker->set_params(s.tracker); /* the ranges of the properties are the tracker's */
+  double time = st.track_time + 1.0 / 30;
+  if (GST_BUFFER_PTS_IS_VALID(buffer))
+    time = double(GST_BUFFER_PTS(buffer)) / GST_SECOND;
+  else if (GST_BUFFER_DURATION_IS_VALID(buffer))
+    time = st.track_time + double(GST_BUFFER_DURATION(buffer)) / GST_SECOND;
+  st.track_time = time;
+  std::vector<lftag::TrackedMarker> markers = st.tracker->update(time, detections);
+  for (const lftag::TrackedMarker& m : st.tracker->lost())
+    GST_DEBUG_OBJECT(self, "track %" G_GUINT64_FORMAT " (%s) lost at %.3f s, unseen since %.3f s", m.track.id,
+                     lftag::gst::marker_key(m.detection.family, m.detection.id).c_str(), time, m.track.last_seen);
+  detections.clear();
+  tracks.clear();
+  for (lftag::TrackedMarker& m : markers) {
+    detections.push_back(std::move(m.detection));
+    tracks.push_back(m.track);
+  }
+}
+
 static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstBuffer* buffer) {
   GstLFTagDetect* self = GST_LFTAG_DETECT(trans);
   GstVideoInfo* info = &GST_VIDEO_FILTER(self)->in_info;
@@ -1093,13 +1199,23 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
     st.warned_deadline = true;
   }
 
-  lftag::gst::attach_detections(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections);
+  std::vector<lftag::TrackInfo> tracks;
+  if (s.tracking) {
+    gst_lftag_detect_track(self, s, buffer, detections, tracks);
+  } else if (st.tracker) {
+    GST_DEBUG_OBJECT(self, "tracking switched off: %" G_GSIZE_FORMAT " tracks ended", st.tracker->size());
+    st.tracker.reset();
+  }
+  const std::vector<lftag::TrackInfo>* tracked = s.tracking ? &tracks : nullptr;
+
+  lftag::gst::attach_detections(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections,
+                                tracked);
 
   if (s.overlay && !detections.empty()) gst_lftag_detect_draw(self, buffer, info, s, camera, detections);
 
   if (GstMessage* message =
           st.messages.frame(GST_OBJECT(self), s.messages, s.message_detections, GST_BASE_TRANSFORM(self)->segment,
-                            buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections))
+                            buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections, tracked))
     gst_element_post_message(GST_ELEMENT(self), message);
   return GST_FLOW_OK;
 }

@@ -83,6 +83,25 @@
  *                                   0 without a second solution
  *   from-outline       gboolean     read from the grey levels under its aligned outline
  *                                   (far or blurred; decode-error and worst-cell are 0)
+ * Detections of lftagdetect with tracking=TRUE only (absent otherwise):
+ *   track-id           guint64      the marker's track, from 1 in order of the tracks'
+ *                                   starts; the same for as long as the track lasts
+ *                                   (0: a second marker of the same family and id in
+ *                                   one frame, which is not tracked)
+ *   track-state        gchararray   "measured" (detected in this frame) or "predicted"
+ *                                   (not detected: the last detection moved where the
+ *                                   track's constant-velocity model puts it; its quality
+ *                                   fields are the last detection's)
+ *   track-age          gdouble      seconds from the track's first frame to this one
+ *   first-seen, last-seen
+ *                      gdouble      the buffer timestamps (seconds) of the track's first
+ *                                   frame and of the last one it was detected in
+ *   pose-flipped       gboolean     an ambiguous pose was replaced by its other solution,
+ *                                   the one nearer the track's rotation (rvec, tvec and
+ *                                   alternative-* are then swapped)
+ *   smoothed-rvec, smoothed-tvec
+ *                      3 gdouble    the One Euro filter's pose (smoothing=TRUE only;
+ *                                   rvec and tvec stay the raw pose)
  * Truth only:
  *   centers            n^2 points   exact projected centres of the black squares
  *   fully-visible      gboolean     in front of the camera and wholly inside the frame
@@ -135,6 +154,14 @@ G_BEGIN_DECLS
 #define LFTAG_FIELD_ALTERNATIVE_RVEC "alternative-rvec"
 #define LFTAG_FIELD_ALTERNATIVE_TVEC "alternative-tvec"
 #define LFTAG_FIELD_ALTERNATIVE_REPROJECTION_ERROR "alternative-reprojection-error"
+#define LFTAG_FIELD_TRACK_ID "track-id"
+#define LFTAG_FIELD_TRACK_STATE "track-state"
+#define LFTAG_FIELD_TRACK_AGE "track-age"
+#define LFTAG_FIELD_FIRST_SEEN "first-seen"
+#define LFTAG_FIELD_LAST_SEEN "last-seen"
+#define LFTAG_FIELD_POSE_FLIPPED "pose-flipped"
+#define LFTAG_FIELD_SMOOTHED_RVEC "smoothed-rvec"
+#define LFTAG_FIELD_SMOOTHED_TVEC "smoothed-tvec"
 #define LFTAG_FIELD_CENTERS "centers"
 #define LFTAG_FIELD_FULLY_VISIBLE "fully-visible"
 #define LFTAG_FIELD_EDGE_PX "edge-px"

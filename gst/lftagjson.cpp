@@ -14,6 +14,20 @@ nlohmann::ordered_json time_json(GstClockTime t) {
 
 }  // namespace
 
+nlohmann::ordered_json track_json(const TrackInfo& t) {
+  nlohmann::ordered_json out;
+  out["id"] = std::uint64_t(t.id);
+  out["state"] = track_state_name(t.state);
+  out["age"] = t.age();
+  out["first_seen"] = t.first_seen;
+  out["last_seen"] = t.last_seen;
+  out["pose_flipped"] = t.flipped;
+  out["smoothed_pose"] = t.smoothed ? nlohmann::ordered_json{{"rvec", tools::vec_json(t.smoothed_rvec)},
+                                                             {"tvec", tools::vec_json(t.smoothed_tvec)}}
+                                    : nlohmann::ordered_json(nullptr);
+  return out;
+}
+
 std::optional<nlohmann::ordered_json> buffer_json(GstBuffer* buffer, const GstSegment& segment, guint64 frame) {
   const std::optional<FrameDetections> found = read_detection_meta(buffer);
   if (!found) return std::nullopt;
@@ -34,7 +48,12 @@ std::optional<nlohmann::ordered_json> buffer_json(GstBuffer* buffer, const GstSe
   // its empty detections say nothing about markers.
   out["analysed"] = found->analysed;
   nlohmann::ordered_json detections = nlohmann::ordered_json::array();
-  for (const Detection& d : found->detections) detections.push_back(nlohmann::ordered_json(tools::detection_json(d)));
+  for (std::size_t i = 0; i < found->detections.size(); ++i) {
+    nlohmann::ordered_json d(tools::detection_json(found->detections[i]));
+    // Only with tracking: what lftagdetect's tracker said of this marker.
+    if (i < found->tracks.size() && found->tracks[i]) d["track"] = track_json(*found->tracks[i]);
+    detections.push_back(std::move(d));
+  }
   out["detections"] = std::move(detections);
   return out;
 }

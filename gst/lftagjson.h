@@ -8,6 +8,7 @@
 #include <string>
 
 #include <gst/gst.h>
+#include <lftag/tracker.hpp>
 #include <nlohmann/json.hpp>
 
 namespace lftag::gst {
@@ -17,7 +18,13 @@ namespace lftag::gst {
 // seconds), "dts", "duration", "running_time", "stream_time" (nanoseconds, null when
 // unknown; the last two from `segment`, when it is in time), "width", "height" (the
 // analysed frame), "analysed" (false for a frame passed on without detection) and
-// "detections". Throws std::invalid_argument on a malformed meta.
+// "detections" (each with a "track" object, track_json, when lftagdetect tracked it).
+// Throws std::invalid_argument on a malformed meta.
+// A marker's track: "id", "state" ("measured" or "predicted"), "age", "first_seen",
+// "last_seen" (seconds), "pose_flipped" and "smoothed_pose" ({"rvec", "tvec"}, or null
+// without smoothing).
+nlohmann::ordered_json track_json(const TrackInfo& track);
+
 std::optional<nlohmann::ordered_json> buffer_json(GstBuffer* buffer, const GstSegment& segment, guint64 frame);
 
 }  // namespace lftag::gst

@@ -296,7 +296,7 @@ const GstMetaInfo* truth_meta_info() {
   return info;
 }
 
-GstStructure* detection_structure(const Detection& d) {
+GstStructure* detection_structure(const Detection& d, const TrackInfo* track) {
   GstStructure* s = gst_structure_new_empty(LFTAG_DETECTION_STRUCTURE_NAME);
   set_identity(s, d.family, d.id);
   set_points(s, LFTAG_FIELD_KEYPOINTS, d.keypoints);
@@ -315,6 +315,17 @@ GstStructure* detection_structure(const Detection& d) {
   set_vec3(s, LFTAG_FIELD_ALTERNATIVE_TVEC, d.alternative_tvec);
   gst_structure_set(s, LFTAG_FIELD_ALTERNATIVE_REPROJECTION_ERROR, G_TYPE_DOUBLE, d.alternative_reprojection_error,
                     LFTAG_FIELD_AMBIGUITY_RATIO, G_TYPE_DOUBLE, d.ambiguity_ratio, nullptr);
+  if (track) {
+    gst_structure_set(s, LFTAG_FIELD_TRACK_ID, G_TYPE_UINT64, guint64(track->id), LFTAG_FIELD_TRACK_STATE,
+                      G_TYPE_STRING, track_state_name(track->state), LFTAG_FIELD_TRACK_AGE, G_TYPE_DOUBLE,
+                      track->age(), LFTAG_FIELD_FIRST_SEEN, G_TYPE_DOUBLE, track->first_seen, LFTAG_FIELD_LAST_SEEN,
+                      G_TYPE_DOUBLE, track->last_seen, LFTAG_FIELD_POSE_FLIPPED, G_TYPE_BOOLEAN,
+                      gboolean(track->flipped), nullptr);
+    if (track->smoothed) {
+      set_vec3(s, LFTAG_FIELD_SMOOTHED_RVEC, track->smoothed_rvec);
+      set_vec3(s, LFTAG_FIELD_SMOOTHED_TVEC, track->smoothed_tvec);
+    }
+  }
   return s;
 }
 
@@ -333,19 +344,21 @@ GstStructure* truth_structure(const MarkerTruth& t) {
   return s;
 }
 
-void set_detections(GstStructure* s, const char* field, const std::vector<Detection>& detections) {
+void set_detections(GstStructure* s, const char* field, const std::vector<Detection>& detections,
+                    const std::vector<TrackInfo>* tracks) {
   std::vector<GstStructure*> items;
-  for (const Detection& d : detections) items.push_back(detection_structure(d));
+  for (std::size_t i = 0; i < detections.size(); ++i)
+    items.push_back(detection_structure(detections[i], tracks && i < tracks->size() ? &(*tracks)[i] : nullptr));
   set_structures(s, field, items);
 }
 
 void add_detection_meta(GstBuffer* buffer, int width, int height, const std::vector<Detection>& detections,
-                        bool analysed) {
+                        bool analysed, const std::vector<TrackInfo>* tracks) {
   detection_meta_info();
   GstStructure* s = gst_custom_meta_get_structure(gst_buffer_add_custom_meta(buffer, LFTAG_META_NAME));
   gst_structure_set(s, LFTAG_META_FIELD_WIDTH, G_TYPE_INT, width, LFTAG_META_FIELD_HEIGHT, G_TYPE_INT, height,
                     LFTAG_META_FIELD_ANALYSED, G_TYPE_BOOLEAN, gboolean(analysed), nullptr);
-  set_detections(s, LFTAG_META_FIELD_DETECTIONS, detections);
+  set_detections(s, LFTAG_META_FIELD_DETECTIONS, detections, tracks);
 }
 
 void add_truth_meta(GstBuffer* buffer, const Camera& camera, const std::vector<MarkerTruth>& markers) {
@@ -391,6 +404,31 @@ Detection detection_from_structure(const GstStructure* s) {
   return d;
 }
 
+std::optional<TrackInfo> track_from_structure(const GstStructure* s) {
+  if (!gst_structure_has_field(s, LFTAG_FIELD_TRACK_ID)) return std::nullopt;
+  TrackInfo t;
+  guint64 id;
+  if (!gst_structure_get_uint64(s, LFTAG_FIELD_TRACK_ID, &id)) malformed(s, LFTAG_FIELD_TRACK_ID, "is not a guint64");
+  t.id = id;
+  const std::string state = get_string(s, LFTAG_FIELD_TRACK_STATE);
+  if (state == track_state_name(TrackState::measured))
+    t.state = TrackState::measured;
+  else if (state == track_state_name(TrackState::predicted))
+    t.state = TrackState::predicted;
+  else
+    malformed(s, LFTAG_FIELD_TRACK_STATE, "is neither \"measured\" nor \"predicted\"");
+  t.first_seen = get_double(s, LFTAG_FIELD_FIRST_SEEN);
+  t.last_seen = get_double(s, LFTAG_FIELD_LAST_SEEN);
+  t.time = t.first_seen + get_double(s, LFTAG_FIELD_TRACK_AGE);
+  t.flipped = get_boolean(s, LFTAG_FIELD_POSE_FLIPPED);
+  if (gst_structure_has_field(s, LFTAG_FIELD_SMOOTHED_RVEC)) {
+    t.smoothed = true;
+    t.smoothed_rvec = get_vec3(s, LFTAG_FIELD_SMOOTHED_RVEC);
+    t.smoothed_tvec = get_vec3(s, LFTAG_FIELD_SMOOTHED_TVEC);
+  }
+  return t;
+}
+
 MarkerTruth truth_from_structure(const GstStructure* s) {
   MarkerTruth t;
   t.family = get_family(s);
@@ -421,6 +459,7 @@ std::optional<FrameDetections> read_detection_meta(GstBuffer* buffer) {
   frame.analysed = analysed;
   frame.detections =
       read_list(s, LFTAG_META_FIELD_DETECTIONS, LFTAG_DETECTION_STRUCTURE_NAME, detection_from_structure);
+  frame.tracks = read_list(s, LFTAG_META_FIELD_DETECTIONS, LFTAG_DETECTION_STRUCTURE_NAME, track_from_structure);
   return frame;
 }
 

@@ -230,6 +230,9 @@ std::string decoder_hint(const std::vector<std::string>& caps) {
 struct Options : DetectorOptions {
   std::string input, output, jsonl, overlay;
   bool quiet = false, strict = false;
+  bool tracking = false;
+  double lost_after = 0.5;  // lftagdetect's lost-after default (lftag::TrackerParams)
+  bool smoothing = false;
 };
 
 // "outline,id,axes" (or with '+', or "none") as the overlay property's flags.
@@ -410,6 +413,8 @@ void Annotator::build() {
   set(detect, "threshold-offset", std::to_string(o_.offset));
   set(detect, "max-candidates", std::to_string(o_.max_candidates));
   g_object_set(detect, "deadline", o_.deadline_ms, nullptr);
+  if (o_.tracking)
+    g_object_set(detect, "tracking", TRUE, "lost-after", o_.lost_after, "smoothing", gboolean(o_.smoothing), nullptr);
   if (!o_.calibration.empty()) g_object_set(detect, "calibration-file", o_.calibration.c_str(), nullptr);
   // Only the options given: the element's own "not set" (0 for fx and fy, -1 for cx and
   // cy) never stands for a value.
@@ -933,6 +938,16 @@ void add_annotate_command(CLI::App& app, int& status) {
   cmd->add_option("--overlay", opt->overlay,
                   "What to draw: outline, id and axes, comma-separated, or none (default outline,id, and axes "
                   "too when a camera is given by --calibration or --fx)");
+  cmd->add_flag("--tracking", opt->tracking,
+                "Track each marker from frame to frame (lftagdetect's tracking): every JSON detection gets a "
+                "\"track\" (id, state measured or predicted, age, first and last seen), and a marker missed "
+                "for a moment is kept as predicted until --lost-after has passed");
+  cmd->add_option("--lost-after", opt->lost_after,
+                  "With --tracking: seconds a marker may go undetected before its track is lost (default 0.5)")
+      ->check(CLI::Range(0.0, 3600.0));
+  cmd->add_flag("--smoothing", opt->smoothing,
+                "With --tracking: a One Euro filter on each track's pose, written as the track's "
+                "\"smoothed_pose\" beside the raw one");
   cmd->add_flag("-q,--quiet", opt->quiet, "No progress and no summary (errors and warnings only)");
   cmd->add_flag("--strict", opt->strict,
                 "Exit with status 3 when the input is damaged (decoder errors, frames missing, timestamps out "
@@ -943,6 +958,8 @@ void add_annotate_command(CLI::App& app, int& status) {
       if (o.output.empty() && o.jsonl.empty()) throw std::invalid_argument("nothing to write: give --output, --jsonl or both");
       Family::parse_list(o.families);
       if (!o.overlay.empty()) overlay_flags(o.overlay);
+      if (!o.tracking && (o.smoothing || o.lost_after != Options().lost_after))
+        throw std::invalid_argument("--lost-after and --smoothing need --tracking");
       if (!o.calibration.empty()) Camera::load(o.calibration);
       check_camera_options(o);
       // lftagdetect's ranges, narrower than the still-image tool's.

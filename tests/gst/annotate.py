@@ -163,6 +163,42 @@ def options_reach_the_detector():
 
 
 @case
+def tracking_in_the_json():
+    # --tracking: every detection has its track; a marker keeps its track for as long as it
+    # is in the lines (a new one only after a line without it), and a predicted marker is
+    # never a new track. Without it, no "track".
+    result = annotate(recording(), "--jsonl", "-", "--tracking", "--smoothing", "--quiet", "--deadline", "0")
+    lines = [json.loads(line) for line in result.stdout.splitlines()]
+    check_jsonl(lines)
+    tracks, previous, seen_ids = {}, set(), set()
+    for line in lines:
+        present = set()
+        for d in line["detections"]:
+            t = d["track"]
+            key = (d["family"], d["id"])
+            present.add(key)
+            assert t["state"] in ("measured", "predicted"), t
+            assert t["id"] >= 1 and isinstance(t["id"], int), t
+            assert t["first_seen"] <= t["last_seen"] <= line["time"] + 1e-9, (t, line["time"])
+            assert abs(t["age"] - (line["time"] - t["first_seen"])) < 1e-6, (t, line["time"])
+            assert (t["state"] == "measured") == (abs(t["last_seen"] - line["time"]) < 1e-9), (t, line["time"])
+            assert len(t["smoothed_pose"]["rvec"]) == 3 and len(t["smoothed_pose"]["tvec"]) == 3, t
+            if key in previous:
+                assert tracks[key] == t["id"], (key, tracks[key], t)
+            else:
+                assert t["state"] == "measured" and t["id"] not in seen_ids, (key, t)
+            tracks[key] = t["id"]
+            seen_ids.add(t["id"])
+        previous = present
+    assert len(seen_ids) >= len(IDS), seen_ids
+    plain = annotate(recording(), "--jsonl", "-", "--quiet", "--deadline", "0")
+    assert all("track" not in d for line in plain.stdout.splitlines() for d in json.loads(line)["detections"])
+    for args in (("--smoothing",), ("--lost-after", "1")):
+        result = annotate(recording(), "--jsonl", "-", *args, expect=2)
+        assert "need --tracking" in result.stderr, result.stderr
+
+
+@case
 def principal_point_zero_is_zero():
     # --cx 0 --cy 0 is the top-left pixel, not "not given" (the frame centre): the pose
     # projects each marker's centre through the principal point given.

@@ -17,6 +17,9 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <lftag/render.hpp>
+#include <lftag/tracker.hpp>
+
 #include "detectmessages.h"
 #include "metaconversion.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
@@ -1774,6 +1777,239 @@ GST_START_TEST(test_bad_families) {
 }
 GST_END_TEST;
 
+// ---------------------------------------------------------------------------
+// Tracking
+
+namespace {
+
+// Rendered GRAY8 frames of markers moving in front of the paper's camera (640x480,
+// fx = fy = 320), pushed into lftagdetect at 30 fps with a bus on which its messages land.
+struct TrackingRun {
+  GstHarness* h;
+  GstBus* bus;
+  GstVideoInfo info;
+  lftag::SceneRenderer renderer{lftag::SceneParams{}};
+  lftag::SceneRenderer smeared{[] {
+    lftag::SceneParams p;
+    p.blur_length_px = 60;  // a shake of the camera: far more than the outline reading reads through
+    p.blur_angle_deg = 90;
+    return p;
+  }()};
+  int frame = 0;
+
+  explicit TrackingRun(const std::string& properties) {
+    gst_video_info_set_format(&info, GST_VIDEO_FORMAT_GRAY8, 640, 480);
+    GST_VIDEO_INFO_FPS_N(&info) = 30;
+    GST_VIDEO_INFO_FPS_D(&info) = 1;
+    h = detector(properties, info);
+    bus = gst_bus_new();
+    gst_element_set_bus(h->element, bus);
+  }
+  ~TrackingRun() {
+    gst_element_set_bus(h->element, nullptr);
+    gst_object_unref(bus);
+    gst_harness_teardown(h);
+  }
+  enum Spoil { none, blank, blur };
+  // The meta of the next frame, holding `markers` (none at all when `blank`, smeared past
+  // reading when `blur`).
+  FrameDetections push(const std::vector<lftag::SceneMarker>& markers, Spoil spoil = none) {
+    std::vector<lftag::SceneTarget> targets;
+    for (const lftag::SceneMarker& m : markers) targets.push_back(lftag::to_target(m));
+    cv::Mat1b image = (spoil == blur ? smeared : renderer).render(targets);
+    if (spoil == blank) image.setTo(128);
+    GstBuffer* buffer = gst_buffer_new_allocate(nullptr, GST_VIDEO_INFO_SIZE(&info), nullptr);
+    GstMapInfo map;
+    gst_buffer_map(buffer, &map, GST_MAP_WRITE);
+    for (int y = 0; y < image.rows; ++y)
+      std::memcpy(map.data + y * GST_VIDEO_INFO_PLANE_STRIDE(&info, 0), image.ptr(y), image.cols);
+    gst_buffer_unmap(buffer, &map);
+    GST_BUFFER_PTS(buffer) = gst_util_uint64_scale(frame, GST_SECOND, 30);
+    GST_BUFFER_DURATION(buffer) = gst_util_uint64_scale(frame + 1, GST_SECOND, 30) - GST_BUFFER_PTS(buffer);
+    ++frame;
+    GstBuffer* out = gst_harness_push_and_pull(h, buffer);
+    fail_unless(out != nullptr);
+    FrameDetections found = detections_of(out);
+    gst_buffer_unref(out);
+    return found;
+  }
+  // The "lftag" messages posted so far.
+  std::vector<GstStructure*> messages() {
+    std::vector<GstStructure*> out;
+    while (GstMessage* m = gst_bus_pop_filtered(bus, GST_MESSAGE_ELEMENT)) {
+      if (gst_structure_has_name(gst_message_get_structure(m), "lftag"))
+        out.push_back(gst_structure_copy(gst_message_get_structure(m)));
+      gst_message_unref(m);
+    }
+    return out;
+  }
+};
+
+lftag::SceneMarker tracked_marker(std::uint64_t id, double x, double z = 2.5) {
+  lftag::SceneMarker m;
+  m.id = lftag::TagId(id);
+  m.tag_size = 0.4;
+  m.rvec = lftag::rotation_from_angles(0, 10, 0);
+  m.tvec = {x, 0.05, z};
+  return m;
+}
+
+void free_structures(std::vector<GstStructure*>& structures) {
+  for (GstStructure* s : structures) gst_structure_free(s);
+  structures.clear();
+}
+
+}  // namespace
+
+// A marker blanked or blurred out of detection for one frame stays in the meta,
+// predicted near where it is, with its id and track; without tracking that frame has no
+// marker. In on-change mode the track's start is the only message (without tracking the
+// gap posts two more).
+GST_START_TEST(test_tracking_predicts_a_missed_frame) {
+  using Case = std::pair<TrackingRun::Spoil, bool>;  // how the frame is spoilt, and tracking
+  for (const auto& [spoil, tracking] : {Case{TrackingRun::blank, true}, Case{TrackingRun::blank, false},
+                                        Case{TrackingRun::blur, true}, Case{TrackingRun::blur, false}}) {
+    TrackingRun run(std::string("messages=on-change tracking=") + (tracking ? "true" : "false"));
+    guint64 track_id = 0;
+    for (int f = 0; f < 10; ++f) {
+      const lftag::SceneMarker marker = tracked_marker(1234, -0.5 + 0.04 * f);
+      const FrameDetections found = run.push({marker}, f == 5 ? spoil : TrackingRun::none);
+      if (!tracking) {
+        fail_unless_equals_int(found.detections.size(), f == 5 ? 0 : 1);
+        fail_unless(found.tracks.size() == found.detections.size() && (found.tracks.empty() || !found.tracks[0]),
+                    "track fields without tracking");
+        continue;
+      }
+      fail_unless_equals_int(found.detections.size(), 1);
+      fail_unless(found.detections[0].id == lftag::TagId(1234), "frame %d: id %s", f,
+                  found.detections[0].id.to_decimal().c_str());
+      fail_unless(found.tracks[0].has_value(), "frame %d: no track", f);
+      const lftag::TrackInfo& t = *found.tracks[0];
+      if (f == 0) track_id = t.id;
+      fail_unless_equals_uint64(t.id, track_id);
+      fail_unless(t.state == (f == 5 ? lftag::TrackState::predicted : lftag::TrackState::measured), "frame %d: %s", f,
+                  lftag::track_state_name(t.state));
+      fail_unless(std::abs(t.first_seen) < 1e-9);
+      fail_unless(std::abs(t.age() - f / 30.0) < 1e-6, "frame %d: age %g", f, t.age());
+      fail_unless(std::abs(t.last_seen - (f == 5 ? 4 : f) / 30.0) < 1e-6);
+      const MarkerTruth truth = lftag::make_truth(run.renderer.params().camera, marker);
+      const double off = cv::norm(found.detections[0].center - truth.center);
+      fail_unless(off < (f == 5 ? 1.5 : 0.5), "frame %d: centre %.2f px off", f, off);
+    }
+    std::vector<GstStructure*> posted = run.messages();
+    fail_unless_equals_int(posted.size(), tracking ? 1 : 3);
+    if (tracking) {
+      fail_unless(strings_of(posted[0], "appeared") == std::vector<std::string>{"3x3:1234"});
+      fail_unless(strings_of(posted[0], "track-states") == std::vector<std::string>{"measured"});
+      const GValue* ids = gst_structure_get_value(posted[0], "track-ids");
+      fail_unless(ids && gst_value_array_get_size(ids) == 1 &&
+                  g_value_get_uint64(gst_value_array_get_value(ids, 0)) == track_id);
+    }
+    free_structures(posted);
+  }
+}
+GST_END_TEST;
+
+// A marker that leaves is predicted for lost-after seconds, then reported lost: it
+// leaves the meta, and an on-change message says it vanished. Seen again, it starts a
+// new track.
+GST_START_TEST(test_tracking_reports_loss) {
+  TrackingRun run("messages=on-change tracking=true lost-after=0.25");
+  for (int f = 0; f < 5; ++f) fail_unless_equals_int(run.push({tracked_marker(77, -0.3 + 0.02 * f)}).detections.size(), 1);
+  std::vector<GstStructure*> posted = run.messages();
+  fail_unless_equals_int(posted.size(), 1);
+  free_structures(posted);
+  // Last seen at 4/30 s: predicted while unseen for at most 0.25 s (frames 5 to 11).
+  for (int f = 5; f < 16; ++f) {
+    const FrameDetections found = run.push({});
+    if (f <= 11) {
+      fail_unless_equals_int(found.detections.size(), 1);
+      fail_unless(found.tracks[0] && found.tracks[0]->state == lftag::TrackState::predicted, "frame %d", f);
+      fail_unless(found.detections[0].id == lftag::TagId(77));
+    } else {
+      fail_unless_equals_int(found.detections.size(), 0);
+    }
+    posted = run.messages();
+    fail_unless_equals_int(posted.size(), f == 12 ? 1 : 0);
+    if (f == 12) {
+      fail_unless(strings_of(posted[0], "vanished") == std::vector<std::string>{"3x3:77"});
+      fail_unless(strings_of(posted[0], "ids").empty());
+    }
+    free_structures(posted);
+  }
+  const FrameDetections again = run.push({tracked_marker(77, 0)});
+  fail_unless_equals_int(again.detections.size(), 1);
+  fail_unless(again.tracks[0] && again.tracks[0]->id == 2 && again.tracks[0]->state == lftag::TrackState::measured);
+  fail_unless(std::abs(again.tracks[0]->age()) < 1e-9);
+  posted = run.messages();
+  fail_unless_equals_int(posted.size(), 1);
+  fail_unless(strings_of(posted[0], "appeared") == std::vector<std::string>{"3x3:77"});
+  free_structures(posted);
+}
+GST_END_TEST;
+
+// Two markers whose paths cross, the farther hidden behind the nearer for a few frames,
+// keep their tracks all the way: no third track, never the other's track id.
+GST_START_TEST(test_tracking_crossing_markers) {
+  TrackingRun run("tracking=true");
+  guint64 near_track = 0, far_track = 0;
+  int predicted = 0;
+  for (int f = 0; f < 21; ++f) {
+    const double x = -0.8 + 0.08 * f;
+    // Far to near, as the renderer draws them.
+    const FrameDetections found = run.push({tracked_marker(2, -1.2 * x + 0.02, 3.0), tracked_marker(1, x)});
+    fail_unless_equals_int(found.detections.size(), 2);
+    for (std::size_t i = 0; i < found.detections.size(); ++i) {
+      fail_unless(found.tracks[i].has_value());
+      const bool near = found.detections[i].id == lftag::TagId(1);
+      fail_unless(near || found.detections[i].id == lftag::TagId(2), "frame %d: id %s", f,
+                  found.detections[i].id.to_decimal().c_str());
+      guint64& expected = near ? near_track : far_track;
+      if (f == 0) expected = found.tracks[i]->id;
+      fail_unless_equals_uint64(found.tracks[i]->id, expected);
+      predicted += found.tracks[i]->state == lftag::TrackState::predicted;
+    }
+  }
+  fail_unless(near_track != far_track && near_track > 0 && far_track > 0);
+  fail_unless(predicted > 0, "the farther marker was never hidden: the test does not cross them");
+}
+GST_END_TEST;
+
+// The tracking properties: defaults, ranges, and a smoothed pose beside the raw one.
+GST_START_TEST(test_tracking_properties) {
+  GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
+  gboolean tracking = TRUE, smoothing = TRUE;
+  double lost_after = 0, min_cutoff = 0, beta = -1;
+  g_object_get(e, "tracking", &tracking, "lost-after", &lost_after, "smoothing", &smoothing, "smoothing-min-cutoff",
+               &min_cutoff, "smoothing-beta", &beta, nullptr);
+  fail_unless(!tracking && !smoothing, "tracking and smoothing are off by default");
+  fail_unless(lost_after == 0.5 && min_cutoff == 1.0 && beta == 1.0);
+  ASSERT_WARNING(g_object_set(e, "lost-after", -1.0, nullptr));
+  ASSERT_WARNING(g_object_set(e, "smoothing-min-cutoff", 0.0, nullptr));
+  ASSERT_WARNING(g_object_set(e, "smoothing-beta", -1.0, nullptr));
+  g_object_get(e, "lost-after", &lost_after, "smoothing-min-cutoff", &min_cutoff, "smoothing-beta", &beta, nullptr);
+  fail_unless(lost_after == 0.5 && min_cutoff == 1.0 && beta == 1.0, "a refused value changed the property");
+  gst_object_unref(e);
+
+  TrackingRun run("tracking=true smoothing=true smoothing-beta=0");
+  FrameDetections found;
+  double before = 0;
+  for (int f = 0; f < 6; ++f) {
+    found = run.push({tracked_marker(5, f < 5 ? -0.3 : 0.0)});
+    fail_unless(found.tracks[0] && found.tracks[0]->smoothed, "frame %d: no smoothed pose", f);
+    if (f < 5) before = found.detections[0].tvec[0];
+  }
+  // The raw pose jumped (0.3 m of the 0.4 m marker, at the element's tag-size of 0.1: a
+  // quarter of that); the smoothed one follows by the filter's factor at 1 Hz and 30 fps,
+  // 1 / (1 + 30 / (2 pi)) = 0.173, and the raw one is kept as it was measured.
+  const double raw = found.detections[0].tvec[0], smoothed = found.tracks[0]->smoothed_tvec[0];
+  fail_unless(std::abs(raw) < 0.005 && before < -0.07, "raw x %g, before %g", raw, before);
+  const double expected = before + (raw - before) / (1 + 30 / (2 * CV_PI));
+  fail_unless(std::abs(smoothed - expected) < 0.01 * std::abs(raw - before), "smoothed x %g, expected %g", smoothed,
+              expected);
+}
+GST_END_TEST;
+
 static Suite* lftagdetect_suite(void) {
   Suite* s = suite_create("lftagdetect");
   TCase* tc = tcase_create("general");
@@ -1816,6 +2052,10 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_video_meta_larger_than_buffer);
   tcase_add_test(tc, test_late_frames);
   tcase_add_test(tc, test_late_frames_in_a_live_pipeline);
+  tcase_add_test(tc, test_tracking_predicts_a_missed_frame);
+  tcase_add_test(tc, test_tracking_reports_loss);
+  tcase_add_test(tc, test_tracking_crossing_markers);
+  tcase_add_test(tc, test_tracking_properties);
   return s;
 }
 

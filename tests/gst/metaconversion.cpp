@@ -2,6 +2,7 @@
 // The metas: registration (the truth without tags, the detections tagged for videoscale,
 // which moves their points), exact round trips of detections and truth
 // (through the buffer, copies and the text form), the public C helpers, and errors.
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -151,6 +152,51 @@ GST_START_TEST(test_detections_round_trip)
   fail_unless_equals_int(frame->detections.size(), detections.size());
   for (std::size_t i = 0; i < detections.size(); ++i) expect_equal(frame->detections[i], detections[i]);
   fail_if(lftag::gst::read_truth_meta(buffer).has_value(), "detections are not truth");
+  gst_buffer_unref(buffer);
+}
+GST_END_TEST;
+
+GST_START_TEST(test_track_fields_round_trip)
+{
+  GstBuffer* buffer = gst_buffer_new();
+  const std::vector<Detection> detections = some_detections();
+  std::vector<lftag::TrackInfo> tracks(detections.size());
+  for (std::size_t i = 0; i < tracks.size(); ++i) {
+    lftag::TrackInfo& t = tracks[i];
+    t.id = 5 + i;
+    t.state = i % 2 ? lftag::TrackState::predicted : lftag::TrackState::measured;
+    t.first_seen = 1.25 + i;
+    t.last_seen = 2.5 + i;
+    t.time = 3.0 + i;
+    t.flipped = i == 0;
+    t.smoothed = i == 1;
+    t.smoothed_rvec = {0.5, -0.25, 0.125};
+    t.smoothed_tvec = {0.01, 0.02, 1.75};
+  }
+  lftag::gst::add_detection_meta(buffer, 640, 480, detections, true, &tracks);
+  const auto frame = lftag::gst::read_detection_meta(buffer);
+  fail_unless(frame.has_value());
+  fail_unless_equals_int(frame->tracks.size(), detections.size());
+  for (std::size_t i = 0; i < detections.size(); ++i) {
+    expect_equal(frame->detections[i], detections[i]);  // the detection's own fields unchanged
+    fail_unless(frame->tracks[i].has_value());
+    const lftag::TrackInfo& t = *frame->tracks[i];
+    fail_unless_equals_uint64(t.id, tracks[i].id);
+    fail_unless(t.state == tracks[i].state && t.flipped == tracks[i].flipped && t.smoothed == tracks[i].smoothed);
+    fail_unless(t.first_seen == tracks[i].first_seen && t.last_seen == tracks[i].last_seen);
+    fail_unless(std::abs(t.age() - tracks[i].age()) < 1e-12);
+    if (t.smoothed) fail_unless(t.smoothed_rvec == tracks[i].smoothed_rvec && t.smoothed_tvec == tracks[i].smoothed_tvec);
+  }
+  gst_buffer_unref(buffer);
+
+  // Without tracks: no track fields, and none read.
+  buffer = gst_buffer_new();
+  lftag::gst::add_detection_meta(buffer, 640, 480, detections);
+  const GstStructure* s = lftag_meta_get_structure(buffer, LFTAG_META_NAME);
+  const GstStructure* first = gst_value_get_structure(gst_value_array_get_value(gst_structure_get_value(s, "detections"), 0));
+  fail_if(gst_structure_has_field(first, LFTAG_FIELD_TRACK_ID));
+  const auto plain = lftag::gst::read_detection_meta(buffer);
+  for (const auto& t : plain->tracks) fail_if(t.has_value());
   gst_buffer_unref(buffer);
 }
 GST_END_TEST;
@@ -372,6 +418,7 @@ static Suite* metaconversion_suite(void) {
   tcase_add_test(tc, test_registration);
   tcase_add_test(tc, test_detection_meta_transform);
   tcase_add_test(tc, test_detections_round_trip);
+  tcase_add_test(tc, test_track_fields_round_trip);
   tcase_add_test(tc, test_id_fields);
   tcase_add_test(tc, test_truth_round_trip);
   tcase_add_test(tc, test_public_helpers);
