@@ -159,7 +159,9 @@ TEST(Tracker, CrossingMarkersKeepTheirTracks) {
       EXPECT_EQ(m.track.id, expected) << "frame " << f;
       EXPECT_EQ(m.track.state, f == 10 && m.detection.id == TagId(2) ? TrackState::predicted : TrackState::measured);
     }
-    if (f == 10) EXPECT_NEAR(out[1].detection.corners[0].x, 200, 1e-6);
+    if (f == 10) {
+      EXPECT_NEAR(out[1].detection.corners[0].x, 200, 1e-6);
+    }
   }
   EXPECT_NE(track_a, track_b);
 }
