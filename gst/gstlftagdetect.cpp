@@ -269,10 +269,10 @@ struct State {
   DetectorSettings built, rejected; /* the detector's settings; a set that failed */
   bool warned_uncalibrated = false;
   lftag::gst::DetectMessages messages;
-  guint64 analysed = 0, skipped = 0; /* frames, for QoS messages */
-  bool warned_budget = false;        /* the first frame the budget cut */
-  bool warned_layout = false;        /* the first frame whose planes lie outside its memory */
-  bool warned_deadline = false;      /* the first frame the deadline cut */
+  guint64 analysed = 0, skipped = 0;     /* frames, for QoS messages */
+  bool warned_budget = false;            /* the first frame the budget cut */
+  bool warned_layout = false;            /* the first frame whose planes lie outside its memory */
+  bool warned_deadline = false;          /* the first frame the deadline cut */
   std::optional<lftag::Tracker> tracker; /* with tracking: the stream's tracks */
   double track_time = 0;                 /* seconds: the last tracked frame's time */
 };
@@ -1208,8 +1208,7 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
   }
   const std::vector<lftag::TrackInfo>* tracked = s.tracking ? &tracks : nullptr;
 
-  lftag::gst::attach_detections(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections,
-                                tracked);
+  lftag::gst::attach_detections(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections, tracked);
 
   if (s.overlay && !detections.empty()) gst_lftag_detect_draw(self, buffer, info, s, camera, detections);
 

@@ -317,10 +317,9 @@ GstStructure* detection_structure(const Detection& d, const TrackInfo* track) {
                     LFTAG_FIELD_AMBIGUITY_RATIO, G_TYPE_DOUBLE, d.ambiguity_ratio, nullptr);
   if (track) {
     gst_structure_set(s, LFTAG_FIELD_TRACK_ID, G_TYPE_UINT64, guint64(track->id), LFTAG_FIELD_TRACK_STATE,
-                      G_TYPE_STRING, track_state_name(track->state), LFTAG_FIELD_TRACK_AGE, G_TYPE_DOUBLE,
-                      track->age(), LFTAG_FIELD_FIRST_SEEN, G_TYPE_DOUBLE, track->first_seen, LFTAG_FIELD_LAST_SEEN,
-                      G_TYPE_DOUBLE, track->last_seen, LFTAG_FIELD_POSE_FLIPPED, G_TYPE_BOOLEAN,
-                      gboolean(track->flipped), nullptr);
+                      G_TYPE_STRING, track_state_name(track->state), LFTAG_FIELD_TRACK_AGE, G_TYPE_DOUBLE, track->age(),
+                      LFTAG_FIELD_FIRST_SEEN, G_TYPE_DOUBLE, track->first_seen, LFTAG_FIELD_LAST_SEEN, G_TYPE_DOUBLE,
+                      track->last_seen, LFTAG_FIELD_POSE_FLIPPED, G_TYPE_BOOLEAN, gboolean(track->flipped), nullptr);
     if (track->smoothed) {
       set_vec3(s, LFTAG_FIELD_SMOOTHED_RVEC, track->smoothed_rvec);
       set_vec3(s, LFTAG_FIELD_SMOOTHED_TVEC, track->smoothed_tvec);
