@@ -236,7 +236,7 @@ TEST(Tracker, RefusesBadParams) {
 // Seconds until the filter's output of a unit step (at t = 0, sampled at 30 Hz from a
 // steady 0) first reaches `level`.
 double step_lag(OneEuroFilter<1>& filter, double level) {
-  filter({-kFrame}, cv::Vec<double, 1>(0.0));
+  filter(-kFrame, cv::Vec<double, 1>(0.0));
   for (int f = 0; f < 300; ++f) {
     const double t = f * kFrame;
     if (filter(t, cv::Vec<double, 1>(1.0))[0] >= level) return t;
