@@ -309,6 +309,7 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
         continue;
       }
       ++stats.decoded, ++stats.second_look_found, ++stats.outline_found;
+      read_places.add(f.n(), reading->homography, f, reading->pixels_per_unit);
       found.push_back(std::move(det));
       return;  // one marker to a patch
     }
@@ -431,7 +432,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
     std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, image, look, taken);
     int outline_reads_left = detail::kMaxOutlineReads;
-    detail::ReadPlaces read_places;  // where this frame's outline readings were made
+    detail::ReadPlaces read_places;  // where this frame's outline readings found markers
     if (int(boxes.size()) > p.max_second_looks) {
       stats.second_looks_skipped += std::int64_t(boxes.size()) - p.max_second_looks;
       boxes.resize(p.max_second_looks);

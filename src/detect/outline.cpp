@@ -974,7 +974,7 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
   return out;
 }
 
-bool ReadPlaces::seen_or_add(int n, const std::array<cv::Point2d, 4>& corners, double pixels_per_unit) {
+bool ReadPlaces::seen(int n, const std::array<cv::Point2d, 4>& corners, double pixels_per_unit) const {
   for (const Place& p : places) {
     if (p.n != n) continue;
     // A unit of the smaller scale: alignments of one marker from different starts agree
@@ -989,8 +989,13 @@ bool ReadPlaces::seen_or_add(int n, const std::array<cv::Point2d, 4>& corners, d
       if (near) return true;
     }
   }
-  places.push_back({n, corners, pixels_per_unit});
   return false;
+}
+
+void ReadPlaces::add(int n, const cv::Matx33d& homography, const Family& family, double pixels_per_unit) {
+  Place p{n, {}, pixels_per_unit};
+  for (int i = 0; i < 4; ++i) p.corners[i] = apply(homography, family.outer_corners()[i]);
+  places.push_back(p);
 }
 
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& coarse,
@@ -1341,7 +1346,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   if (read_places) {
     std::array<cv::Point2d, 4> corners;
     for (int i = 0; i < 4; ++i) corners[i] = apply(aligned, family.outer_corners()[i]);
-    if (read_places->seen_or_add(family.n(), corners, out.pixels_per_unit)) {
+    if (read_places->seen(family.n(), corners, out.pixels_per_unit)) {
       out.repeated = true;
       return out;
     }
