@@ -338,9 +338,9 @@ def field_p90_table(results):
                    tuned_validated(rows, system, "all", "visible", cell("p90_rotation_deg", 3))] for system in systems])
 
 
-def field_times_table(results):
+def field_times_table(results, name="field_times.csv"):
     times, systems = {}, []
-    for r in read(results, "field_times.csv"):
+    for r in read(results, name):
         if r["set"] == "both":
             times[(r["system"], r["condition"])] = r
             if r["system"] not in systems:
@@ -351,6 +351,26 @@ def field_times_table(results):
         return (f"{float(r['mean_ms']):.1f} / {float(r['median_ms']):.1f} / {float(r['p99_ms']):.1f}" if r
                 else "-")
     return table(["system (ms per frame, one thread: mean / median / p99, both sets)"] + conditions,
+                 [[system] + [cell(system, c) for c in conditions] for system in systems])
+
+
+def field_cost_ratio_table(results):
+    def ratios(name):
+        times = {(r["system"], r["condition"]): r for r in read(results, name) if r["set"] == "both"}
+        out = {}
+        for (system, c), r in times.items():
+            base = times.get(("apriltag-36h11-d2", c))
+            if base and system.startswith("lftag"):
+                out[(system, c)] = (float(r["mean_ms"]) / float(base["mean_ms"]),
+                                    float(r["p99_ms"]) / float(base["p99_ms"]))
+        return out
+    before, after = ratios("field_times.csv"), ratios("field_times_cost.csv")
+    systems = sorted({s for s, _ in after})
+    conditions = [c for c in FIELD_CONDITIONS if any(k[1] == c for k in after)]
+    def cell(system, c):
+        b, a = before.get((system, c)), after.get((system, c))
+        return f"{b[0]:.2f} / {b[1]:.2f} -> {a[0]:.2f} / {a[1]:.2f}" if a and b else "-"
+    return table(["system (mean / p99 over AprilTag d2's: before -> after)"] + conditions,
                  [[system] + [cell(system, c) for c in conditions] for system in systems])
 
 
@@ -376,7 +396,11 @@ def main(results):
                         ("Field wrong ids", field_wrong_table),
                         ("Field pose error by condition", field_pose_table),
                         ("Field pose error, all conditions", field_p90_table),
-                        ("Field frame times", field_times_table)]:
+                        ("Field frame times", field_times_table),
+                        ("Field frame times, after the outline reading's cost work",
+                         lambda r: field_times_table(r, "field_times_cost.csv")),
+                        ("Field frame times over AprilTag 36h11 decimate 2's in the same run, before / after",
+                         field_cost_ratio_table)]:
         print(f"### {title}\n\n{make(results)}\n")
 
 

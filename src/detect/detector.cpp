@@ -233,7 +233,8 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
 // `reads_left`: the frame's remaining outline reads (detail::kMaxOutlineReads a frame).
 void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& frame, const ImageView& work,
                    const Camera& camera, const DetectorParams& p, const detail::Deadline& deadline,
-                   DetectionStats& stats, std::vector<Detection>& found, int& reads_left, DetectionTrace* trace) {
+                   DetectionStats& stats, std::vector<Detection>& found, int& reads_left,
+                   detail::ReadPlaces& read_places, DetectionTrace* trace) {
   for (const std::array<cv::Point2d, 4>& outline : detail::coarse_outlines(binary, frame))
     for (const Family& f : p.families) {
       OutlineVerdict* verdict = nullptr;
@@ -254,7 +255,7 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
       --reads_left;
       ++stats.outline_reads;
       const std::optional<detail::OutlineReading> reading =
-          detail::read_outline(work, outline, f, p.min_pixels_per_unit, deadline);
+          detail::read_outline(work, outline, f, p.min_pixels_per_unit, deadline, &read_places);
       const Stage stage = reading ? detail::outline_stage(*reading, p) : Stage::alignment;
       if (stage == Stage::deadline) ++stats.skipped_by_deadline;
       if (verdict) {
@@ -308,6 +309,7 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
         continue;
       }
       ++stats.decoded, ++stats.second_look_found, ++stats.outline_found;
+      read_places.add(f.n(), reading->homography, f, reading->pixels_per_unit);
       found.push_back(std::move(det));
       return;  // one marker to a patch
     }
@@ -430,6 +432,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
     std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, image, look, taken);
     int outline_reads_left = detail::kMaxOutlineReads;
+    detail::ReadPlaces read_places;  // where this frame's outline readings found markers
     if (int(boxes.size()) > p.max_second_looks) {
       stats.second_looks_skipped += std::int64_t(boxes.size()) - p.max_second_looks;
       boxes.resize(p.max_second_looks);
@@ -464,7 +467,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       if (found.size() == before) {
         start = Clock::now();
         read_outlines(s.patch_binary, s.patch.frame, image, camera, p, deadline, stats, found, outline_reads_left,
-                      trace);
+                      read_places, trace);
         stats.second_look_ms += elapsed_ms(start);
       }
     }

@@ -506,8 +506,14 @@ cv::Mat1f smeared_by(const cv::Mat1f& image, const cv::Mat1f& kernel) {
       const int dy = ky - ay, dx = kx - ax;
       const cv::Rect to = cv::Rect(-dx, -dy, image.cols, image.rows) & cv::Rect(0, 0, image.cols, image.rows);
       if (to.empty()) continue;
-      cv::Mat1f target = out(to);
-      cv::scaleAdd(image(to + cv::Point(dx, dy)), w, target, target);
+      // By rows, as cv::scaleAdd would, without its per-call and per-row set-up (a pixel
+      // model's reading smears about 140 small maps by some 30 taps each at every length
+      // it tries: half of a motion-blurred read's time went to that set-up).
+      for (int y = 0; y < to.height; ++y) {
+        float* o = out.ptr<float>(to.y + y) + to.x;
+        const float* in = image.ptr<float>(to.y + y + dy) + to.x + dx;
+        for (int x = 0; x < to.width; ++x) o[x] += w * in[x];
+      }
     }
   return out;
 }
@@ -603,6 +609,10 @@ class PixelModel {
 
   bool valid() const { return !grey_.empty(); }
 
+  // The least motion blur a reading can report (Reading::smear) for a smear found while
+  // aligning, frame pixels: every length it tries is a scale of that one.
+  static double least_smear(cv::Point2d smear) { return cv::norm(smear) > 0.5 ? cv::norm(smear) * kSmearScales.front() : 0; }
+
   struct Reading {
     TagId id;
     double margin = 0;
@@ -621,6 +631,11 @@ class PixelModel {
   Reading read(TagId start, double pixels_per_unit, double contrast) const {
     Reading best{start, 0, 0, 0, 0};
     double best_rss = std::numeric_limits<double>::infinity();
+    // The fit that wins, by its residual alone: its margins (a third of a fit's work, and
+    // the same whichever fit they are taken from last) are measured once, for it alone.
+    double best_scale = 0, best_blur = 0;
+    cv::Mat1f best_fixed;
+    std::vector<std::array<cv::Mat1f, 4>> best_squares;
     const bool smeared = smear_ != cv::Point2d();
     // With a motion blur, which dominates, only the lesser optical blurs are tried.
     const std::vector<double> blurs =
@@ -636,16 +651,19 @@ class PixelModel {
       for (std::size_t i = 0; i < cells_.size(); ++i)
         for (int d = 0; d < 4; ++d) squares[i][d] = smear(squares_[i][d].share);
       for (const double blur : blurs) {
-        const Fit fit = fit_at(blur * pixels_per_unit, fixed, squares, start);
+        const Fit fit = fit_at(blur * pixels_per_unit, fixed, squares, start, false);
         if (fit.rss < best_rss) {
           best_rss = fit.rss;
-          best = {fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
-                  cv::norm(smear_) * scale, fit.rss > 0 ? fit.least_gain / (fit.rss / fit.samples) : 0,
-                  fit.noise_margin, fit.evidence};
-          if (!(fit.ink > 0.4 * contrast)) best.margin = 0;
+          best_scale = scale, best_blur = blur, best_fixed = fixed, best_squares = squares;
         }
       }
     }
+    if (best_fixed.empty()) return best;
+    const Fit fit = fit_at(best_blur * pixels_per_unit, best_fixed, best_squares, start, true);
+    best = {fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
+            cv::norm(smear_) * best_scale, fit.rss > 0 ? fit.least_gain / (fit.rss / fit.samples) : 0,
+            fit.noise_margin, fit.evidence};
+    if (!(fit.ink > 0.4 * contrast)) best.margin = 0;
     return best;
   }
 
@@ -692,19 +710,22 @@ class PixelModel {
   }
 
   // The fit from `start` with the coverage (`fixed`, `smeared_squares`: smeared already)
-  // blurred by a Gaussian of `sigma` pixels.
+  // blurred by a Gaussian of `sigma` pixels; its id, residual and ink only, unless
+  // `margins` (the least gain, the noise margin and the evidence too).
   Fit fit_at(double sigma, const cv::Mat1f& fixed, const std::vector<std::array<cv::Mat1f, 4>>& smeared_squares,
-             TagId start) const {
-    const auto blurred = [&](const cv::Mat1f& m) {
-      cv::Mat1f out = m.clone();  // the sums below change it
-      if (sigma > 0.2) cv::GaussianBlur(out, out, cv::Size(), sigma, sigma, cv::BORDER_CONSTANT);
+             TagId start, bool margins) const {
+    // A copy only of what the sums below change (`total`); the squares' maps are read only.
+    const auto blurred = [&](const cv::Mat1f& m, bool copy) {
+      cv::Mat1f out;
+      if (sigma > 0.2) cv::GaussianBlur(m, out, cv::Size(), sigma, sigma, cv::BORDER_CONSTANT);
+      else out = copy ? m.clone() : m;
       return out;
     };
-    cv::Mat1f total = blurred(fixed);
+    cv::Mat1f total = blurred(fixed, true);
     std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
     std::vector<int> digit(cells_.size());
     for (std::size_t i = 0; i < cells_.size(); ++i) {
-      for (int d = 0; d < 4; ++d) squares[i][d] = blurred(smeared_squares[i][d]);
+      for (int d = 0; d < 4; ++d) squares[i][d] = blurred(smeared_squares[i][d], false);
       digit[i] = start.digit(family_.data_index(cells_[i]));
       total(squares_[i][0].rect) += squares[i][digit[i]];
     }
@@ -748,12 +769,12 @@ class PixelModel {
     Fit fit;
     fit.rss = sums.rss(&fit.ink);
     fit.samples = sums.n;
+    for (std::size_t i = 0; i < cells_.size(); ++i) fit.id = fit.id.with_digit(family_.data_index(cells_[i]), digit[i]);
+    if (!margins) return fit;
     fit.least_gain = std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < cells_.size(); ++i) {
+    for (std::size_t i = 0; i < cells_.size(); ++i)
       for (int d = 0; d < 4; ++d)
         if (d != digit[i]) fit.least_gain = std::min(fit.least_gain, moved(i, d).rss() - fit.rss);
-      fit.id = fit.id.with_digit(family_.data_index(cells_[i]), digit[i]);
-    }
 
     // The noise margin. With grey = prediction + noise, moving a square changes the
     // prediction by p = ink * delta (delta: the change of its coverage), and the fit worsens
@@ -953,9 +974,33 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
   return out;
 }
 
+bool ReadPlaces::seen(int n, const std::array<cv::Point2d, 4>& corners, double pixels_per_unit) const {
+  for (const Place& p : places) {
+    if (p.n != n) continue;
+    // A unit of the smaller scale: alignments of one marker from different starts agree
+    // to a fraction of one (the field experiment's quick plan, tuning and validation
+    // frames of 3x3 and 6x6 under motion, H.264 at 1080p, bent and shadow: 9 repeated
+    // reads, 0.54 to 1.71 px per unit, within 0.12 units of the first; no other pair of
+    // a frame's readings within 4 units).
+    const double reach = std::min(p.pixels_per_unit, pixels_per_unit);
+    for (int turn = 0; turn < 4; ++turn) {
+      bool near = true;
+      for (int i = 0; i < 4 && near; ++i) near = cv::norm(p.corners[(i + turn) % 4] - corners[i]) <= reach;
+      if (near) return true;
+    }
+  }
+  return false;
+}
+
+void ReadPlaces::add(int n, const cv::Matx33d& homography, const Family& family, double pixels_per_unit) {
+  Place p{n, {}, pixels_per_unit};
+  for (int i = 0; i < 4; ++i) p.corners[i] = apply(homography, family.outer_corners()[i]);
+  places.push_back(p);
+}
+
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& coarse,
                                            const Family& family, double min_pixels_per_unit,
-                                           const Deadline& deadline) {
+                                           const Deadline& deadline, ReadPlaces* read_places) {
   const int side = family.side();
   // The frame around the coarse outline, with room for the alignment to move and for an
   // outline of the data squares only.
@@ -1287,9 +1332,25 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     if (pair - others > best_gap) best_gap = pair - others, best = k;
   }
   out.baseline_gap = best_gap;
-  // What the reading below cannot change decides first: it is the expensive part.
-  if (out.correlation < kMinCorrelation || out.contrast < kMinContrast || out.baseline_gap < kMinBaselineGap)
+  // What the reading below cannot change decides first: it is the expensive part (each of
+  // its pixel models fits 6 to 15 blurs, and a reading makes two to four). The resolution
+  // is the alignment's, and the smear the reading reports is at least
+  // PixelModel::least_smear of the alignment's: in the field experiment's tuning set most
+  // of the time of a frame under motion blur went to readings of markers blurred by more
+  // than kMaxSmear, and at 1080p to readings under min_pixels_per_unit, all refused after
+  // the reading.
+  out.smear = PixelModel::least_smear(smear) / out.pixels_per_unit;
+  if (out.pixels_per_unit < min_pixels_per_unit || out.correlation < kMinCorrelation ||
+      out.contrast < kMinContrast || out.baseline_gap < kMinBaselineGap || out.smear > kMaxSmear)
     return out;  // margin and marker correlation 0: not acceptable
+  if (read_places) {
+    std::array<cv::Point2d, 4> corners;
+    for (int i = 0; i < 4; ++i) corners[i] = apply(aligned, family.outer_corners()[i]);
+    if (read_places->seen(family.n(), corners, out.pixels_per_unit)) {
+      out.repeated = true;
+      return out;
+    }
+  }
   // Aligned corner `best` (clockwise from the aligned top-left) is the true top-left.
   const cv::Matx33d h = aligned * turn(best, side);
   out.homography = h;
@@ -1380,13 +1441,14 @@ Stage outline_stage(const OutlineReading& r, const DetectorParams& params) {
   // Too small to read first (read_outline decides it first for a start far under the
   // bound), then in the order read_outline decides them.
   if (r.past_deadline) return Stage::deadline;
+  if (r.repeated) return Stage::duplicate;
   if (r.pixels_per_unit < params.min_pixels_per_unit) return Stage::resolution;
   if (r.correlation < kMinCorrelation) return Stage::structure;
   if (r.contrast < kMinContrast) return Stage::contrast;
   if (r.baseline_gap < kMinBaselineGap) return Stage::baselines;
+  if (r.smear > kMaxSmear) return Stage::smear;  // the alignment's smear decides before the reading
   if (r.margin < kMinMargin || r.evidence < kMinEvidence) return Stage::margin;
   if (r.marker_correlation < kMinMarkerCorrelation) return Stage::marker;
-  if (r.smear > kMaxSmear) return Stage::smear;
   return Stage::detected;
 }
 

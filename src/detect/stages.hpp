@@ -301,6 +301,27 @@ struct OutlineReading {
   double smear = 0;              // length of the motion blur found, units (0: none)
   double defocus = 0;            // Gaussian blur found beyond the pixels', units (0: none)
   bool past_deadline = false;    // cut short by the frame's deadline: not acceptable
+  bool repeated = false;         // aligned where the frame's readings found a marker already: not read
+};
+
+// Where a frame's outline readings found a marker (the aligned outer corners, frame
+// pixels), so that another outline of the same marker, from another patch or group of
+// pieces, is not read again: its alignment lands where the first one did, and its
+// detection would be dropped as a duplicate after the pixel models (most of a reading's
+// cost). Refused readings are not recorded: another start can align a little differently
+// and read the marker (in the full field plan, 12 markers of 3x3, 4x4 and 6x6 through
+// H.264 and small at 1080p were read so, and lost when refused places were skipped too).
+struct ReadPlaces {
+  struct Place {
+    int n = 0;
+    std::array<cv::Point2d, 4> corners;
+    double pixels_per_unit = 0;
+  };
+  std::vector<Place> places;
+  // Whether a marker of family n was found with every corner within a unit of `corners`
+  // (in any turn).
+  bool seen(int n, const std::array<cv::Point2d, 4>& corners, double pixels_per_unit) const;
+  void add(int n, const cv::Matx33d& homography, const Family& family, double pixels_per_unit);
 };
 
 // Aligns the fixed structure of `family` to the image from `outline` (its outer corners,
@@ -308,10 +329,12 @@ struct OutlineReading {
 // A start well under `min_pixels_per_unit` is not aligned: the reading returned has only
 // its correlation and pixels per unit, which fail the checks. Each alignment starts only
 // while `deadline` has not passed; after it the reading returned is marked past_deadline.
+// With `read_places`, an outline aligned where a marker was found already is not read
+// again (the reading returned is marked repeated).
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& outline,
                                            const Family& family,
                                            double min_pixels_per_unit = DetectorParams{}.min_pixels_per_unit,
-                                           const Deadline& deadline = {});
+                                           const Deadline& deadline = {}, ReadPlaces* read_places = nullptr);
 
 // The checks an outline reading must pass to be a detection, each scale-free.
 constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it
