@@ -20,6 +20,7 @@
 #include <vector>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "calibration_file.hpp"
 
@@ -488,6 +489,13 @@ cv::Mat read_grey_image(const std::string& path, std::uint64_t max_pixels) {
     throw std::runtime_error("cannot decode '" + path + "': " + e.err);
   }
   if (grey.empty()) throw std::runtime_error("cannot decode '" + path + "' as an image");
+  // OpenCV's colour PFM and Radiance HDR readers give three channels whatever the flag
+  // asks: the detector takes one, of 8 bits.
+  if (grey.depth() != CV_8U) grey.convertTo(grey, CV_8U);
+  if (grey.channels() == 3) cv::cvtColor(grey, grey, cv::COLOR_BGR2GRAY);
+  if (grey.channels() == 4) cv::cvtColor(grey, grey, cv::COLOR_BGRA2GRAY);
+  if (grey.type() != CV_8UC1)
+    throw std::runtime_error("cannot decode '" + path + "' as an 8-bit grey image");
   return grey;
 }
 

@@ -146,8 +146,22 @@ TEST(ImageFile, HeadersGiveTheSizesOpenCVWrites) {
     const std::optional<cv::Size> size = image_file_size(path);
     ASSERT_TRUE(size) << ext;
     EXPECT_EQ(*size, cv::Size(53, 37)) << ext;
-    EXPECT_EQ(read_grey_image(path).size(), cv::Size(53, 37)) << ext;
+    const cv::Mat grey = read_grey_image(path);
+    EXPECT_EQ(grey.size(), cv::Size(53, 37)) << ext;
+    EXPECT_EQ(grey.type(), CV_8UC1) << ext;  // the detector's input, whatever the file holds
   }
+}
+
+// OpenCV decodes a colour PFM (and Radiance HDR) as three channels even when asked for
+// grey: read_grey_image gives one, as the detector takes (a fuzzed PFM once came through
+// as three and was refused by the detector).
+TEST(ImageFile, ColourPfmIsReadAsOneChannel) {
+  const std::string path = kTmp + "/colour.pfm";
+  ASSERT_TRUE(cv::imwrite(path, cv::Mat3f(4, 6, cv::Vec3f(100, 100, 100))));
+  const cv::Mat grey = read_grey_image(path);
+  ASSERT_EQ(grey.type(), CV_8UC1);
+  EXPECT_EQ(grey.size(), cv::Size(6, 4));
+  EXPECT_EQ(cv::countNonZero(grey != 100), 0);
 }
 
 TEST(ImageFile, ImagesPastTheLimitAreRefusedBeforeDecoding) {
