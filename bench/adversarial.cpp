@@ -24,6 +24,7 @@
 #include "trial.hpp"
 
 #include "lftag/detector.hpp"
+#include "lftag/trace.hpp"
 
 namespace bench {
 namespace {

@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "lftag/detector.hpp"
+#include "lftag/trace.hpp"
 #include "system.hpp"
 
 namespace bench {

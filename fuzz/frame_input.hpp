@@ -38,6 +38,7 @@
 #include <opencv2/core/utility.hpp>
 
 #include "lftag/detector.hpp"
+#include "lftag/trace.hpp"
 
 namespace lftag::fuzz {
 

@@ -109,6 +109,7 @@
 
 #include <lftag/detector.hpp>
 #include <lftag/draw.hpp>
+#include <lftag/trace.hpp>
 #include <lftag/tracker.hpp>
 
 #include "detectmessages.h"

@@ -37,6 +37,7 @@
 #include <opencv2/core.hpp>
 
 #include "lftag/detector.hpp"
+#include "lftag/trace.hpp"
 
 namespace lftag::detail {
 

@@ -14,6 +14,7 @@
 #include "lftag/detector.hpp"
 #include "lftag/draw.hpp"
 #include "lftag/image_file.hpp"
+#include "lftag/trace.hpp"
 
 namespace lftag::tools {
 namespace {

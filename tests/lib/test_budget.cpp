@@ -10,6 +10,7 @@
 
 #include "lftag/detector.hpp"
 #include "lftag/render.hpp"
+#include "lftag/trace.hpp"
 #include "scenes.hpp"
 
 using namespace lftag;

@@ -14,6 +14,7 @@
 
 #include "lftag/draw.hpp"
 #include "lftag/render.hpp"
+#include "lftag/trace.hpp"
 
 using namespace lftag;
 

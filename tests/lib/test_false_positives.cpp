@@ -9,6 +9,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "lftag/detector.hpp"
+#include "lftag/trace.hpp"
 
 using namespace lftag;
 

@@ -13,6 +13,7 @@
 #include "lftag/detector.hpp"
 #include "lftag/draw.hpp"
 #include "lftag/render.hpp"
+#include "lftag/trace.hpp"
 #include "scenes.hpp"
 
 using namespace lftag;

@@ -10,6 +10,7 @@
 
 #include "lftag/camera.hpp"
 #include "lftag/detector.hpp"
+#include "lftag/trace.hpp"
 
 namespace lftag {
 
