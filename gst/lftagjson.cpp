@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 #include "lftagjson.h"
 
-#include "json.hpp"  // src/tools: the JSON of a detection
+#include "detection_json.hpp"  // src/io: the JSON of a detection
 #include "metaconversion.h"
 
 namespace lftag::gst {
@@ -22,8 +22,8 @@ nlohmann::ordered_json track_json(const TrackInfo& t) {
   out["first_seen"] = t.first_seen;
   out["last_seen"] = t.last_seen;
   out["pose_flipped"] = t.flipped;
-  out["smoothed_pose"] = t.smoothed ? nlohmann::ordered_json{{"rvec", tools::vec_json(t.smoothed_rvec)},
-                                                             {"tvec", tools::vec_json(t.smoothed_tvec)}}
+  out["smoothed_pose"] = t.smoothed ? nlohmann::ordered_json{{"rvec", io::vec_json(t.smoothed_rvec)},
+                                                             {"tvec", io::vec_json(t.smoothed_tvec)}}
                                     : nlohmann::ordered_json(nullptr);
   return out;
 }
@@ -49,7 +49,7 @@ std::optional<nlohmann::ordered_json> buffer_json(GstBuffer* buffer, const GstSe
   out["analysed"] = found->analysed;
   nlohmann::ordered_json detections = nlohmann::ordered_json::array();
   for (std::size_t i = 0; i < found->detections.size(); ++i) {
-    nlohmann::ordered_json d(tools::detection_json(found->detections[i]));
+    nlohmann::ordered_json d(io::detection_json(found->detections[i]));
     // Only with tracking: what lftagdetect's tracker said of this marker.
     if (i < found->tracks.size() && found->tracks[i]) d["track"] = track_json(*found->tracks[i]);
     detections.push_back(std::move(d));

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // A buffer's LFTag detections as one line of JSON: what lftagpublish writes and
-// `lftag annotate --jsonl` keeps. The detections are src/tools/json.hpp's, the same
+// `lftag annotate --jsonl` keeps. The detections are src/io/detection_json.hpp's, the same
 // objects `lftag detect` prints.
 #pragma once
 

@@ -10,7 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
-#include "json.hpp"
+#include "detection_json.hpp"
 #include "lftag/detector.hpp"
 #include "lftag/draw.hpp"
 #include "lftag/image_file.hpp"
@@ -44,9 +44,9 @@ nlohmann::json verdict_json(const CandidateVerdict& v) {
                         {"stage", stage_name(v.stage)},
                         {"second_look", v.second_look},
                         {"center", {mean.x, mean.y}},
-                        {"centroids", points_json(v.centroids)}};
+                        {"centroids", io::points_json(v.centroids)}};
   if (v.reading) {
-    out["reading"] = id_json(*v.reading);
+    out["reading"] = io::id_json(*v.reading);
     out["decode_error"] = v.decode_error;
     out["worst_cell"] = v.worst_cell;
     out["noise_margin"] = v.noise_margin;
@@ -58,7 +58,7 @@ nlohmann::json verdict_json(const CandidateVerdict& v) {
 nlohmann::json outline_json(const OutlineVerdict& v) {
   nlohmann::json out = {{"family", v.family.name()},
                         {"stage", stage_name(v.stage)},
-                        {"outline", points_json({v.outline.begin(), v.outline.end()})},
+                        {"outline", io::points_json({v.outline.begin(), v.outline.end()})},
                         {"correlation", v.correlation},
                         {"marker_correlation", v.marker_correlation},
                         {"contrast", v.contrast},
@@ -68,7 +68,7 @@ nlohmann::json outline_json(const OutlineVerdict& v) {
                         {"pixels_per_unit", v.pixels_per_unit},
                         {"smear", v.smear},
                         {"defocus", v.defocus}};
-  if (v.reading) out["reading"] = id_json(*v.reading);
+  if (v.reading) out["reading"] = io::id_json(*v.reading);
   return out;
 }
 
@@ -174,7 +174,7 @@ void add_detect_command(CLI::App& app, int& status) {
             it->second.detect(ImageView(grey), &stats, opt->debug_dir.empty() && !opt->why ? nullptr : &trace);
         out["time_ms"] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
         out["detections"] = nlohmann::json::array();
-        for (const Detection& d : found) out["detections"].push_back(detection_json(d));
+        for (const Detection& d : found) out["detections"].push_back(io::detection_json(d));
         if (opt->stats) out["stats"] = stats_json(stats);
         if (opt->why) {
           out["candidates"] = nlohmann::json::array();

@@ -10,7 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "commands.hpp"
-#include "json.hpp"
+#include "detection_json.hpp"
 #include "lftag/image_file.hpp"
 #include "lftag/render.hpp"
 
@@ -50,9 +50,9 @@ std::vector<SceneMarker> read_scene(const std::string& path) {
 }
 
 nlohmann::json truth_json(const MarkerTruth& t) {
-  return {{"family", t.family.name()}, {"id", id_json(t.id)},      {"tag_size", t.tag_size},
-          {"rvec", vec_json(t.rvec)},   {"tvec", vec_json(t.tvec)}, {"keypoints", points_json(t.keypoints)},
-          {"centers", points_json(t.centers)}, {"corners", points_json(t.corners)},
+  return {{"family", t.family.name()}, {"id", io::id_json(t.id)},      {"tag_size", t.tag_size},
+          {"rvec", io::vec_json(t.rvec)},   {"tvec", io::vec_json(t.tvec)}, {"keypoints", io::points_json(t.keypoints)},
+          {"centers", io::points_json(t.centers)}, {"corners", io::points_json(t.corners)},
           {"fully_visible", t.fully_visible}, {"edge_px", t.edge_px}};
 }
 

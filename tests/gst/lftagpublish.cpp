@@ -22,7 +22,7 @@
 
 #include "errors.hpp"
 #include "frames.hpp"
-#include "json.hpp"
+#include "detection_json.hpp"
 #include "metaconversion.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
@@ -153,7 +153,7 @@ void expect_lines_match(const std::vector<nlohmann::json>& lines, const Run& run
     nlohmann::json expected = nlohmann::json::array();
     const GValue* list = gst_structure_get_value(seen.meta, LFTAG_META_FIELD_DETECTIONS);
     for (guint k = 0; k < gst_value_array_get_size(list); ++k)
-      expected.push_back(lftag::tools::detection_json(
+      expected.push_back(lftag::io::detection_json(
           lftag::gst::detection_from_structure(gst_value_get_structure(gst_value_array_get_value(list, k)))));
     fail_unless(line.at("detections") == expected, "frame %d: %s", int(i), line.at("detections").dump().c_str());
   }

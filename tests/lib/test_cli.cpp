@@ -10,7 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "../../src/tools/json.hpp"  // the JSON of one detection, shared by every output
+#include "detection_json.hpp"  // src/io: the JSON of one detection, shared by every output
 
 namespace {
 
@@ -417,14 +417,14 @@ TEST(Cli, TheJsonOfAPoseCarriesItsOtherSolutionOrNull) {
   d.rvec = {0.1, 0.2, 0.3}, d.tvec = {0.01, 0.02, 1.5};
   d.alternative_rvec = {-0.1, 0.2, 0.3}, d.alternative_tvec = {0.01, 0.02, 1.49};
   d.reprojection_error = 0.04, d.alternative_reprojection_error = 0.05, d.ambiguity_ratio = 1.25;
-  const nlohmann::json both = lftag::tools::detection_json(d);
+  const nlohmann::json both = lftag::io::detection_json(d);
   EXPECT_EQ(both["pose"]["ambiguity_ratio"].get<double>(), 1.25);
   EXPECT_EQ(both["pose"]["alternative"]["rvec"], nlohmann::json({-0.1, 0.2, 0.3}));
   EXPECT_EQ(both["pose"]["alternative"]["tvec"], nlohmann::json({0.01, 0.02, 1.49}));
   EXPECT_EQ(both["pose"]["alternative"]["reprojection_error"].get<double>(), 0.05);
   // No second solution (ratio 0): no pose of zeros standing for one.
   d.ambiguity_ratio = 0;
-  const nlohmann::json one = lftag::tools::detection_json(d);
+  const nlohmann::json one = lftag::io::detection_json(d);
   EXPECT_EQ(one["pose"]["ambiguity_ratio"].get<double>(), 0);
   EXPECT_TRUE(one["pose"]["alternative"].is_null());
   EXPECT_EQ(one["pose"]["rvec"], nlohmann::json({0.1, 0.2, 0.3}));

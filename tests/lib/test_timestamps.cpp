@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
-// TimestampWatch (src/tools/timestamps.hpp): the gaps, repeats and early ends that
+// TimestampWatch (src/tools/gst/timestamps.hpp): the gaps, repeats and early ends that
 // `lftag annotate` reports, and the frame numbers it derives from stream time.
 #include "timestamps.hpp"
 

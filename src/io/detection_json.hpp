@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // JSON conventions of the command-line contract (SPEC 5), and the JSON of one detection:
 // what `lftag detect` prints, and what lftagpublish and `lftag annotate --jsonl` write.
-// Header-only (nlohmann/json), so the GStreamer plugin shares it with the tool.
+// Header-only (nlohmann/json): the small internal library src/io (lftag_io_dep in
+// src/meson.build) that the tool, the GStreamer plugin and their tests all use, so that
+// neither includes the other's folder.
 #pragma once
 
 #include <vector>
@@ -12,7 +14,7 @@
 #include "lftag/detector.hpp"
 #include "lftag/tag_id.hpp"
 
-namespace lftag::tools {
+namespace lftag::io {
 
 // A JSON number where it is exact in every JSON reader (53 bits), else a decimal string.
 inline nlohmann::json id_json(TagId id) {
@@ -57,4 +59,4 @@ inline nlohmann::json detection_json(const Detection& d) {
           {"from_outline", d.from_outline}};
 }
 
-}  // namespace lftag::tools
+}  // namespace lftag::io

@@ -35,7 +35,7 @@
 #include <gst/pbutils/pbutils.h>
 #include <gst/video/video.h>
 
-#include "commands.hpp"
+#include "../commands.hpp"
 #include "gstplugin.hpp"
 #include "lftag-meta.h"
 #include "lftag/camera.hpp"
