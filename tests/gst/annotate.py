@@ -280,13 +280,22 @@ def no_encoder_says_what_to_install():
 
 @case
 def finds_the_plugin_of_its_build():
-    # Run as a user runs build/src/lftag: no plugin path at all, a registry of its own.
+    # Run as the README says to run build/src/lftag: under `meson devenv`, which puts the
+    # build's gst/ on GST_PLUGIN_PATH (the binary keeps no path of the build tree), with no
+    # plugin path of our own and a registry of its own.
     env = {k: v for k, v in os.environ.items() if not k.startswith("GST_PLUGIN")}
     env["GST_REGISTRY_1_0"] = path("plain.registry")
-    result = subprocess.run([lftag, "annotate", recording(), "--jsonl", "-", "-q"], capture_output=True, text=True,
-                            env=env, timeout=600)
+    build = os.path.dirname(os.path.dirname(os.path.abspath(lftag)))
+    result = subprocess.run(["meson", "devenv", "-C", build, lftag, "annotate", recording(), "--jsonl", "-", "-q"],
+                            capture_output=True, text=True, env=env, timeout=600)
     assert result.returncode == 0, result.stderr
     assert len(result.stdout.splitlines()) == FRAMES
+    # Without it, the tool says in one line how to run it, unless a plugin is installed.
+    result = subprocess.run([lftag, "annotate", recording(), "--jsonl", "-", "-q"], capture_output=True, text=True,
+                            env=env, timeout=600)
+    if result.returncode != 0:
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 1 and len(lines) == 1 and "meson devenv" in lines[0], result.stderr
 
 
 def interrupt_leaves_nothing(sig, status):

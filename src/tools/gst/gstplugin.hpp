@@ -6,11 +6,11 @@
 
 namespace lftag::tools {
 
-// Initialises GStreamer with the plugin available. The tool of a build tree uses that
-// build's plugin (its gst/ folder goes first on GST_PLUGIN_PATH, as `meson devenv` does);
-// an installed tool uses GStreamer's registry (GST_PLUGIN_PATH, then the system plugin
-// directory, where `meson install` puts the plugin) and, if the plugin is not there,
-// the directory it was installed to. Returns an empty string, or why the plugin's
+// Initialises GStreamer with the plugin available: GStreamer's registry (GST_PLUGIN_PATH,
+// then the system plugin directory, where `meson install` puts the plugin) and, if the
+// plugin is not there, the directory it is installed to. Nothing of the build tree is
+// baked in: a tool run from the build finds the build's plugin on GST_PLUGIN_PATH, which
+// `meson devenv -C build` and the tests set. Returns an empty string, or why the plugin's
 // elements cannot be had (a sentence that says what to do).
 std::string init_gstreamer_with_plugin();
 
