@@ -313,8 +313,10 @@ bool run_tracking(const Options& options) {
       {"video", video_clips(options)},
       {"field", options.quick ? field_clips(options, kQuickFieldClips, kQuickFieldFrames)
                               : field_clips(options, kFieldClips, kFieldFrames)}};
-  for (const auto& [source_name, source] : sources) {
-    const std::string source_label = source_name;
+  for (const auto& named : sources) {
+    // Not a structured binding: C++17 lets no lambda capture one (clang refuses).
+    const std::string source_label = named.first;
+    ClipSource* const source = named.second.get();
     int done = 0;
     parallel_for(source->size(), threads, [&](int c, int worker) {
       const RenderedClip clip = source->render(c, workers[std::size_t(worker)]);
@@ -348,8 +350,10 @@ bool run_tracking(const Options& options) {
   for (int s = 0; s < n; ++s) {
     const std::string family = workers[0][std::size_t(s)]->family();
     const bool tracks = names[std::size_t(s)].rfind("lftag-", 0) == 0;
-    for (const auto& [key, k] : tallies[s]) {
-      const auto& [source, set, condition] = key;
+    for (const auto& entry : tallies[s]) {
+      const Key& key = entry.first;
+      const Tally& k = entry.second;
+      const std::string &source = std::get<0>(key), &set = std::get<1>(key), &condition = std::get<2>(key);
       summary.row(names[s], family, source, set, condition, k.frames, k.markers, k.found_off,
                   percent(k.found_off, k.markers), tracks ? k.found_measured : kNaN,
                   tracks ? k.found_predicted : kNaN,
