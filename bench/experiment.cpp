@@ -28,6 +28,9 @@ const std::vector<Experiment>& experiments() {
       {"field", "recall, wrong ids, pose error and time per condition (shadows, motion and rolling shutter, pillbox, "
                 "barrel, low light, Bayer, bent, small at 1080p, crowded, occlusion, H.264), tuning and validation sets",
        run_field},
+      {"tracking", "the video and field clips with LFTag's tracking off and on: recall (measured, predicted), wrong ids, "
+                   "wrong pose choices, jitter raw and smoothed, frame time against AprilTag 36h11 d2, both sets",
+       run_tracking},
   };
   return all;
 }

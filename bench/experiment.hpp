@@ -20,7 +20,7 @@ struct Options {
   int threads = 1;                      // worker threads (never used for timing)
   std::uint64_t seed = 1;
   std::filesystem::path save_misses;   // when set: the video and range frames where a system missed a marker
-  std::vector<std::string> conditions;  // the field experiment's conditions to run (empty: all)
+  std::vector<std::string> conditions;  // the field (and tracking) experiment's conditions to run (empty: all)
 };
 
 // An experiment writes its CSV files into options.out and returns false when a check it
@@ -43,6 +43,7 @@ bool run_video(const Options& options);
 bool run_speed(const Options& options);
 bool run_adversarial(const Options& options);
 bool run_field(const Options& options);
+bool run_tracking(const Options& options);
 
 // A generator seeded from the run seed and a path of indices, so that every system sees
 // the same random poses and frames whatever the thread and order.

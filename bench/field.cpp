@@ -23,6 +23,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "clip_source.hpp"
 #include "csv.hpp"
 #include "experiment.hpp"
 #include "h264.hpp"
@@ -825,11 +826,10 @@ double elapsed_ms(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-}  // namespace
 
-bool run_field(const Options& options) {
-  const Plan plan = options.quick ? kQuick : kFull;
-  const Sources sources = split_sources(options.data);
+// The clips of the chosen conditions (all when none are named), `clips` per condition
+// and set; the H.264 conditions only where GStreamer can code them.
+std::vector<Clip> plan_clips(const Options& options, const Sources& sources, int clips_per_condition, int frames) {
   const std::string no_h264 = h264_unavailable();
   if (!no_h264.empty()) progress("field: the H.264 conditions are left out: " + no_h264);
 
@@ -848,9 +848,79 @@ bool run_field(const Options& options) {
     for (int condition = 0; condition < kConditions; ++condition) {
       if (!chosen[std::size_t(condition)]) continue;
       if ((condition == kH264 || condition == kH264Small) && !no_h264.empty()) continue;
-      for (int i = 0; i < plan.clips; ++i)
-        clips.push_back(plan_clip(sources, set, condition, i, plan.frames, options.seed));
+      for (int i = 0; i < clips_per_condition; ++i)
+        clips.push_back(plan_clip(sources, set, condition, i, frames, options.seed));
     }
+  return clips;
+}
+
+// Marker `slot` of every clip of `set` for `system`: each set its own ids.
+std::vector<std::string> set_ids(const FiducialSystem& system, int set, std::uint64_t seed) {
+  const std::vector<std::string> all = system.marker_ids(2 * kIdsPerSet, seed);
+  return {all.begin() + set * kIdsPerSet, all.begin() + (set + 1) * kIdsPerSet};
+}
+
+class FieldClips final : public ClipSource {
+ public:
+  FieldClips(const Options& options, int clips, int frames)
+      : seed_(options.seed), sources_(split_sources(options.data)), reader_(sources_.all) {
+    clips_ = plan_clips(options, sources_, clips, frames);
+    order_.resize(clips_.size());
+    std::iota(order_.begin(), order_.end(), 0);
+    std::stable_sort(order_.begin(), order_.end(), [&](int a, int b) {
+      return std::make_pair(clips_[a].source, clips_[a].start) < std::make_pair(clips_[b].source, clips_[b].start);
+    });
+  }
+  int size() const override { return int(clips_.size()); }
+  RenderedClip render(int index, const std::vector<std::unique_ptr<FiducialSystem>>& systems) override {
+    const Clip& c = clips_[std::size_t(order_[std::size_t(index)])];
+    RenderedClip out;
+    out.set = kSets[c.set];
+    out.condition = kInfo[c.condition].name;
+    out.index = c.index;
+    out.camera = c.camera;
+    out.tag_size = kTagSize;
+    out.fps = kFps;
+    out.poses = c.poses;
+    for (int f = 0; f < c.frames; ++f) {
+      out.visible.emplace_back();
+      for (const Truth& t : truth_of(c, f)) out.visible.back().push_back(t.subset == kVisible);
+    }
+    std::vector<std::vector<std::string>> ids;
+    for (const auto& system : systems) {
+      ids.push_back(set_ids(*system, c.set, seed_));
+      out.ids.emplace_back();
+      for (std::size_t m = 0; m < c.extras.size(); ++m) out.ids.back().push_back(marker_id(ids.back(), c, int(m)));
+    }
+    std::vector<cv::Mat1b> frames;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      for (int f = 0; f < c.frames; ++f)
+        frames.push_back(reader_.read(c.source, sources_.all[c.source].video ? c.start + f : 0));
+    }
+    out.images = render_clip(c, frames, systems, ids, seed_);
+    return out;
+  }
+
+ private:
+  std::uint64_t seed_;
+  Sources sources_;
+  std::vector<Clip> clips_;
+  std::vector<int> order_;
+  std::mutex mutex_;  // guards the reader
+  FrameReader reader_;
+};
+
+}  // namespace
+
+std::unique_ptr<ClipSource> field_clips(const Options& options, int clips, int frames) {
+  return std::make_unique<FieldClips>(options, clips, frames);
+}
+
+bool run_field(const Options& options) {
+  const Plan plan = options.quick ? kQuick : kFull;
+  const Sources sources = split_sources(options.data);
+  const std::vector<Clip> clips = plan_clips(options, sources, plan.clips, plan.frames);
   // Videos are read forward: clips in the order of their source and first frame.
   std::vector<int> order(clips.size());
   std::iota(order.begin(), order.end(), 0);
@@ -868,9 +938,7 @@ bool run_field(const Options& options) {
   std::vector<std::vector<std::vector<std::string>>> ids(2, std::vector<std::vector<std::string>>(n));  // set, system
   for (int s = 0; s < n; ++s) {
     families.push_back(workers[0][s]->family());
-    const std::vector<std::string> all = workers[0][s]->marker_ids(2 * kIdsPerSet, options.seed);
-    for (int set = 0; set < 2; ++set)
-      ids[set][s].assign(all.begin() + set * kIdsPerSet, all.begin() + (set + 1) * kIdsPerSet);
+    for (int set = 0; set < 2; ++set) ids[set][s] = set_ids(*workers[0][s], set, options.seed);
   }
   auto frame_ids = [&](const Clip& c, int s) {
     std::vector<std::string> v;

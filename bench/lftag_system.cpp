@@ -22,31 +22,37 @@ cv::Mat1b LftagSystem::marker_cells(const std::string& id) const {
   return family_.unit_bitmap(lftag::TagId::parse(id));
 }
 
-void LftagSystem::set_camera(const lftag::Camera& camera, double tag_size) {
+lftag::DetectorParams LftagSystem::params_for(const lftag::Camera& camera, double tag_size) const {
   lftag::DetectorParams params = base_;
   params.families = {family_};
   params.camera = camera;
   params.tag_size = tag_size;
-  detector_ = std::make_unique<lftag::Detector>(params);
+  return params;
+}
+
+void LftagSystem::set_camera(const lftag::Camera& camera, double tag_size) {
+  detector_ = std::make_unique<lftag::Detector>(params_for(camera, tag_size));
+}
+
+Detected to_detected(const lftag::Detection& d) {
+  Detected det;
+  det.id = d.id.to_decimal();
+  det.points.assign(d.keypoints.begin(), d.keypoints.end());
+  det.center = d.center;
+  det.pose = Pose{d.rvec, d.tvec};
+  if (d.ambiguity_ratio > 0) {
+    det.alternative = Pose{d.alternative_rvec, d.alternative_tvec};
+    det.ambiguity_ratio = d.ambiguity_ratio;
+  }
+  det.confidence = d.noise_margin;
+  det.path = d.from_outline ? "outline" : "topology";
+  return det;
 }
 
 std::vector<Detected> LftagSystem::detect(const cv::Mat1b& grey) {
   lftag::DetectionStats stats;
   std::vector<Detected> out;
-  for (const lftag::Detection& d : detector_->detect(lftag::ImageView(grey), &stats)) {
-    Detected det;
-    det.id = d.id.to_decimal();
-    det.points.assign(d.keypoints.begin(), d.keypoints.end());
-    det.center = d.center;
-    det.pose = Pose{d.rvec, d.tvec};
-    if (d.ambiguity_ratio > 0) {
-      det.alternative = Pose{d.alternative_rvec, d.alternative_tvec};
-      det.ambiguity_ratio = d.ambiguity_ratio;
-    }
-    det.confidence = d.noise_margin;
-    det.path = d.from_outline ? "outline" : "topology";
-    out.push_back(std::move(det));
-  }
+  for (const lftag::Detection& d : detector_->detect(lftag::ImageView(grey), &stats)) out.push_back(to_detected(d));
   stats_ += stats;
   return out;
 }

@@ -13,6 +13,9 @@
 
 namespace bench {
 
+// A detection as the benchmarks score it.
+Detected to_detected(const lftag::Detection& d);
+
 class LftagSystem : public FiducialSystem {
  public:
   // `base`: the parameters besides the family, camera and tag size (an experiment's variant).
@@ -24,6 +27,9 @@ class LftagSystem : public FiducialSystem {
   std::vector<std::string> marker_ids(int count, std::uint64_t seed) const override;
   cv::Mat1b marker_cells(const std::string& id) const override;
   void set_camera(const lftag::Camera& camera, double tag_size) override;
+  // The detector's parameters for this camera and tag size (what set_camera builds it
+  // with), for an experiment that drives an lftag::Detector itself.
+  lftag::DetectorParams params_for(const lftag::Camera& camera, double tag_size) const;
   std::vector<Detected> detect(const cv::Mat1b& grey) override;
   void reset_counters() override { stats_ = {}; }
   std::vector<std::pair<std::string, double>> counters() const override;

@@ -50,7 +50,7 @@ int run(int argc, char** argv) {
                  "Write each video, range or field frame where a system missed a marker (field: or read a wrong id) "
                  "to this directory (PNG)");
   app.add_option("--conditions", conditions,
-                 "Comma-separated conditions of the field experiment (default: all)");
+                 "Comma-separated conditions of the field and tracking experiments (default: all)");
   app.add_flag("--list", list, "List experiments and systems, then exit");
   CLI11_PARSE(app, argc, argv);
 

@@ -374,6 +374,40 @@ def field_cost_ratio_table(results):
                  [[system] + [cell(system, c) for c in conditions] for system in systems])
 
 
+def tracking_recall_table(results):
+    def f(v, fmt="{:.1f}"):
+        return fmt.format(float(v)) if v not in ("", None) else "-"
+    rows = [[r["system"], r["source"], r["set"], r["markers"], f(r["recall_per_frame_pct"]),
+             f(r["recall_tracked_pct"]), r["found_predicted"] or "-", r["predicted_off_target"] or "-",
+             f"{r['wrong_per_frame']} / {r['wrong_tracked'] or '-'}",
+             f"{f(r['wrong_choice_off_pct'])} / {f(r['wrong_choice_on_pct'])}"]
+            for r in read(results, "tracking_summary.csv") if r["condition"] == "all"]
+    return table(["system", "clips", "set", "markers", "recall per frame %", "tracked % (measured + predicted)",
+                  "predicted on target", "predicted off target", "wrong ids off / on",
+                  "wrong pose choices % off / on"], rows)
+
+
+def tracking_jitter_table(results):
+    rows = [[r["system"], r["source"], r["set"], r["pose"], r["pairs"],
+             " / ".join(f"{float(r[k]):.2f}" for k in ("mean_rotation_deg", "p95_rotation_deg", "p99_rotation_deg")),
+             " / ".join(f"{float(r[k]):.2f}" for k in ("mean_translation_mm", "p95_translation_mm",
+                                                         "p99_translation_mm")),
+             " / ".join(f"{float(r[k]):.3f}" for k in ("mean_translation_pct", "p95_translation_pct",
+                                                         "p99_translation_pct"))]
+            for r in read(results, "tracking_jitter.csv") if r["pairs"] not in ("", "0")]
+    return table(["system", "clips", "set", "pose", "frame pairs", "rotation change error deg (mean / p95 / p99)",
+                  "translation change error mm", "translation change error % of distance"], rows)
+
+
+def tracking_times_table(results):
+    def f(v):
+        return f"{float(v):.2f}" if v else "-"
+    rows = [[r["system"], r["source"], r["set"], r["tracking"], r["frames"], f(r["mean_ms"]), f(r["p99_ms"]),
+             f(r["mean_over_peer"]), f(r["p99_over_peer"])] for r in read(results, "tracking_times.csv")]
+    return table(["system", "clips", "set", "tracking", "frames", "mean ms", "p99 ms", "mean / AprilTag d2's",
+                  "p99 / AprilTag d2's"], rows)
+
+
 def main(results):
     results = Path(results)
     for title, make in [("Range", range_table), ("Grazing angle", angle_table), ("Motion blur", blur_table),
@@ -400,7 +434,10 @@ def main(results):
                         ("Field frame times, after the outline reading's cost work",
                          lambda r: field_times_table(r, "field_times_cost.csv")),
                         ("Field frame times over AprilTag 36h11 decimate 2's in the same run, before / after",
-                         field_cost_ratio_table)]:
+                         field_cost_ratio_table),
+                        ("Tracking: recall and wrong choices, tracking off / on", tracking_recall_table),
+                        ("Tracking: jitter (error of the frame-to-frame pose change)", tracking_jitter_table),
+                        ("Tracking: frame times, tracking off / on", tracking_times_table)]:
         print(f"### {title}\n\n{make(results)}\n")
 
 

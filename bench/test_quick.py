@@ -55,6 +55,13 @@ EXPECTED = {
     "field_wrong.csv": (["system", "set", "condition", "clip", "frame", "id", "nearest_id", "distance_edges"], False),
     "field_clips.csv": (["set", "condition", "clip", "background", "codec", "kbps", "shadow_level", "pillbox_radius_px",
                          "k1", "black", "white", "gamma"], False),
+    "tracking_summary.csv": (["system", "source", "set", "condition", "markers", "found_per_frame",
+                              "recall_per_frame_pct", "found_measured", "found_predicted", "recall_tracked_pct",
+                              "wrong_per_frame", "wrong_tracked", "wrong_choice_off_pct", "wrong_choice_on_pct"], True),
+    "tracking_jitter.csv": (["system", "source", "set", "pose", "pairs", "mean_rotation_deg", "p99_rotation_deg",
+                             "mean_translation_mm", "p99_translation_pct"], True),
+    "tracking_times.csv": (["system", "source", "set", "tracking", "frames", "mean_ms", "p99_ms", "mean_over_peer",
+                            "p99_over_peer"], True),
     "adversarial.csv": (["config", "variant", "median_ms", "ratio", "candidates", "skipped_by_budget", "found",
                          "all_found", "mean_ms", "p99_ms", "max_ms", "past_deadline", "skipped_by_deadline"], False),
 }

@@ -16,6 +16,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "clip_source.hpp"
 #include "csv.hpp"
 #include "experiment.hpp"
 #include "sources.hpp"
@@ -248,6 +249,33 @@ struct Job {
   int clip, frame;
 };
 
+// The renderer of frame f of a clip: its lighting over the shaken video frame `source`.
+lftag::SceneRenderer frame_renderer(const Clip& clip, int f, int frames, const cv::Mat1b& source,
+                                    const lftag::Camera& camera) {
+  lftag::SceneParams params;
+  params.camera = camera;
+  params.photo = background(source, camera, clip.shake[f]);
+  params.exposure = clip.exposure * (1 + clip.drift * std::sin(2 * CV_PI * f / frames + clip.drift_phase));
+  params.light_gradient = clip.gradient;
+  params.light_angle_deg = clip.light_angle;
+  params.noise_sigma = clip.noise;
+  return lftag::SceneRenderer(params);
+}
+
+// One noise field per frame for every system (non-zero: zero selects params.seed).
+std::uint64_t frame_noise_seed(std::uint64_t seed, int clip, int f) {
+  return seeded(seed, {0x7015e, std::uint64_t(clip), std::uint64_t(f)})() | 1;
+}
+
+// Frame f of a clip as `system`'s camera delivers it, its markers `frame_ids` by slot.
+cv::Mat1b frame_image(const lftag::SceneRenderer& renderer, const Clip& clip, int f, const FiducialSystem& system,
+                      const std::vector<std::string>& frame_ids, std::uint64_t noise_seed) {
+  std::vector<lftag::SceneTarget> targets;
+  for (int m = 0; m < kMarkers; ++m)
+    targets.push_back(system.target(frame_ids[m], kTagSize, clip.poses[f][m].rvec, clip.poses[f][m].tvec));
+  return camera_output(renderer, renderer.render_linear(targets), clip.defocus, noise_seed);
+}
+
 int bin_of(const std::vector<double>& edges, double value) {
   const auto it = std::upper_bound(edges.begin() + 1, edges.end() - 1, value);
   return int(it - edges.begin()) - 1;  // values beyond the ends count in the end bins
@@ -272,14 +300,81 @@ void save_miss(const std::filesystem::path& dir, const std::string& system, cons
   cv::imwrite((dir / (name + ".png")).string(), image);
 }
 
-}  // namespace
 
-bool run_video(const Options& options) {
-  const Plan plan = options.quick ? kQuick : kFull;
+std::vector<Source> video_sources(const Options& options) {
   std::vector<Source> videos;
   for (const Source& s : list_sources(options.data))
     if (s.video) videos.push_back(s);
   if (videos.empty()) throw std::runtime_error("no videos in " + options.data.string() + " (install opencv-doc)");
+  return videos;
+}
+
+class VideoClips final : public ClipSource {
+ public:
+  explicit VideoClips(const Options& options)
+      : plan_(options.quick ? kQuick : kFull),
+        seed_(options.seed),
+        videos_(video_sources(options)),
+        camera_(lftag::Camera::default_for(kFrameSize.width, kFrameSize.height)),
+        reader_(videos_) {
+    for (int c = 0; c < plan_.clips; ++c) clips_.push_back(plan_clip(camera_, videos_, c, plan_.frames, seed_));
+    // Videos are read forward: clip indices in the order of their source and start.
+    for (int c = 0; c < plan_.clips; ++c) order_.push_back(c);
+    std::sort(order_.begin(), order_.end(), [&](int a, int b) {
+      return std::make_pair(clips_[a].source, clips_[a].start) < std::make_pair(clips_[b].source, clips_[b].start);
+    });
+  }
+  int size() const override { return plan_.clips; }
+  RenderedClip render(int index, const std::vector<std::unique_ptr<FiducialSystem>>& systems) override {
+    const int c = order_[std::size_t(index)];
+    const Clip& clip = clips_[c];
+    RenderedClip out;
+    out.set = videos_[clip.source].path.filename() == "vtest.avi" ? "validation" : "tuning";
+    out.condition = "video";
+    out.index = c;
+    out.camera = camera_;
+    out.tag_size = kTagSize;
+    out.fps = 30;
+    out.poses = clip.poses;
+    out.visible.assign(clip.poses.size(), std::vector<bool>(kMarkers, true));
+    for (const auto& system : systems) {
+      const std::vector<std::string> test_ids = system->marker_ids(kIds, seed_);
+      out.ids.emplace_back();
+      for (int m = 0; m < kMarkers; ++m) out.ids.back().push_back(marker_id(test_ids, c, m));
+    }
+    out.images.resize(systems.size());
+    for (int f = 0; f < plan_.frames; ++f) {
+      cv::Mat1b frame;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        frame = reader_.read(clip.source, clip.start + f);
+      }
+      const lftag::SceneRenderer renderer = frame_renderer(clip, f, plan_.frames, frame, camera_);
+      const std::uint64_t noise = frame_noise_seed(seed_, c, f);
+      for (std::size_t s = 0; s < systems.size(); ++s)
+        out.images[s].push_back(frame_image(renderer, clip, f, *systems[s], out.ids[s], noise));
+    }
+    return out;
+  }
+
+ private:
+  Plan plan_;
+  std::uint64_t seed_;
+  std::vector<Source> videos_;
+  lftag::Camera camera_;
+  std::vector<Clip> clips_;
+  std::vector<int> order_;
+  std::mutex mutex_;  // guards the reader
+  FrameReader reader_;
+};
+
+}  // namespace
+
+std::unique_ptr<ClipSource> video_clips(const Options& options) { return std::make_unique<VideoClips>(options); }
+
+bool run_video(const Options& options) {
+  const Plan plan = options.quick ? kQuick : kFull;
+  const std::vector<Source> videos = video_sources(options);
   const lftag::Camera camera = lftag::Camera::default_for(kFrameSize.width, kFrameSize.height);
 
   std::vector<Clip> clips;
@@ -326,17 +421,8 @@ bool run_video(const Options& options) {
       const Clip& clip = clips[jobs[j].clip];
       const int f = jobs[j].frame;
       const std::vector<Pose>& poses = clip.poses[f];
-      lftag::SceneParams params;
-      params.camera = camera;
-      params.photo = background(frame, camera, clip.shake[f]);
-      params.exposure = clip.exposure * (1 + clip.drift * std::sin(2 * CV_PI * f / plan.frames + clip.drift_phase));
-      params.light_gradient = clip.gradient;
-      params.light_angle_deg = clip.light_angle;
-      params.noise_sigma = clip.noise;
-      const lftag::SceneRenderer renderer(params);
-      // One noise field per frame for every system (non-zero: zero selects params.seed).
-      const std::uint64_t noise_seed =
-          seeded(options.seed, {0x7015e, std::uint64_t(jobs[j].clip), std::uint64_t(f)})() | 1;
+      const lftag::SceneRenderer renderer = frame_renderer(clip, f, plan.frames, frame, camera);
+      const std::uint64_t noise_seed = frame_noise_seed(options.seed, jobs[j].clip, f);
 
       std::vector<cv::Point2d> centers;
       std::vector<double> tolerances;
@@ -348,12 +434,8 @@ bool run_video(const Options& options) {
       for (int s = 0; s < n; ++s) {
         FiducialSystem& system = *systems[s];
         std::vector<std::string> frame_ids;
-        std::vector<lftag::SceneTarget> targets;
-        for (int m = 0; m < kMarkers; ++m) {
-          frame_ids.push_back(marker_id(test_ids[s], jobs[j].clip, m));
-          targets.push_back(system.target(frame_ids[m], kTagSize, poses[m].rvec, poses[m].tvec));
-        }
-        const cv::Mat1b image = camera_output(renderer, renderer.render_linear(targets), clip.defocus, noise_seed);
+        for (int m = 0; m < kMarkers; ++m) frame_ids.push_back(marker_id(test_ids[s], jobs[j].clip, m));
+        const cv::Mat1b image = frame_image(renderer, clip, f, system, frame_ids, noise_seed);
         const std::vector<Detected> detections = system.detect(image);
         std::vector<Seen>& out = seen[j][s];
         out.resize(kMarkers);
