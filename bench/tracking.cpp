@@ -158,6 +158,16 @@ int wrong_ids(const std::vector<Detected>& detections, const std::vector<std::st
   return wrong;
 }
 
+// Where frame `f` puts each of the clip's markers (the projected centre) and how near a
+// detection must be to count as it (as score()).
+void truth_targets(const RenderedClip& clip, int f, std::vector<cv::Point2d>& centers,
+                   std::vector<double>& tolerances) {
+  for (const Pose& p : clip.poses[std::size_t(f)]) {
+    centers.push_back(clip.camera.project({{0, 0, 0}}, p.rvec, p.tvec)[0]);
+    tolerances.push_back(std::max(2.0, edge_px(clip.camera, p, clip.tag_size) / 4));
+  }
+}
+
 // One system over one clip: the tally of its frames.
 Tally run_clip(FiducialSystem& system, const RenderedClip& clip, int s) {
   Tally k;
@@ -198,11 +208,7 @@ Tally run_clip(FiducialSystem& system, const RenderedClip& clip, int s) {
       // The measured poses and their smoothed ones, by marker (below).
       std::vector<cv::Point2d> centers;
       std::vector<double> tolerances;
-      for (std::size_t m = 0; m < markers; ++m) {
-        const Pose& p = clip.poses[std::size_t(f)][m];
-        centers.push_back(clip.camera.project({{0, 0, 0}}, p.rvec, p.tvec)[0]);
-        tolerances.push_back(std::max(2.0, edge_px(clip.camera, p, clip.tag_size) / 4));
-      }
+      truth_targets(clip, f, centers, tolerances);
       k.wrong_off += wrong_ids(off, ids, centers, tolerances);
       std::vector<Detected> all_on = measured;
       for (const Detected& d : predicted)
@@ -256,11 +262,7 @@ Tally run_clip(FiducialSystem& system, const RenderedClip& clip, int s) {
       ++k.frames;
       std::vector<cv::Point2d> centers;
       std::vector<double> tolerances;
-      for (std::size_t m = 0; m < markers; ++m) {
-        const Pose& p = clip.poses[std::size_t(f)][m];
-        centers.push_back(clip.camera.project({{0, 0, 0}}, p.rvec, p.tvec)[0]);
-        tolerances.push_back(std::max(2.0, edge_px(clip.camera, p, clip.tag_size) / 4));
-      }
+      truth_targets(clip, f, centers, tolerances);
       k.wrong_off += wrong_ids(off, ids, centers, tolerances);
       for (std::size_t m = 0; m < markers; ++m) {
         const Pose& truth = clip.poses[std::size_t(f)][m];
