@@ -380,11 +380,12 @@ def tracking_recall_table(results):
     rows = [[r["system"], r["source"], r["set"], r["markers"], f(r["recall_per_frame_pct"]),
              f(r["recall_tracked_pct"]), r["found_predicted"] or "-", r["predicted_off_target"] or "-",
              f"{r['wrong_per_frame']} / {r['wrong_tracked'] or '-'}",
-             f"{f(r['wrong_choice_off_pct'])} / {f(r['wrong_choice_on_pct'])}"]
+             f"{f(r['wrong_choice_off_pct'])} / {f(r['wrong_choice_on_pct'])}",
+             f"{f(r.get('recall_sparse_pct'))} / {r.get('wrong_sparse') or '-'}"]
             for r in read(results, "tracking_summary.csv") if r["condition"] == "all"]
     return table(["system", "clips", "set", "markers", "recall per frame %", "tracked % (measured + predicted)",
                   "predicted on target", "predicted off target", "wrong ids off / on",
-                  "wrong pose choices % off / on"], rows)
+                  "wrong pose choices % off / on", "full search every 10th frame: tracked % / wrong ids"], rows)
 
 
 def tracking_jitter_table(results):

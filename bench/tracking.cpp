@@ -1,19 +1,23 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // The tracking experiment (issue 27, "Measured"): the video and field experiments' clips,
-// frame after frame, with LFTag's tracking off (per-frame detection) and on
-// (lftag::Tracker over the detections: tracks by family and id, constant-velocity
-// prediction of a marker missed in a frame, the pose chosen by the track when a frame's
-// pose is ambiguous, and the One Euro filter on the published pose), beside AprilTag,
-// which has no tracker and is the reference for jitter and frame time. Per system, source
-// (video, field), set (tuning, validation) and condition:
-// - recall per frame and tracked, measured and predicted apart; a prediction counts as
+// frame after frame, with LFTag's tracking off (per-frame detection), on (as lftagdetect
+// tracking=true: every frame searched, the tracked markers the search missed looked for
+// where predicted, lftag::Tracker over the detections: tracks by family and id,
+// constant-velocity prediction of a marker missed in a frame, the pose chosen by the
+// track when a frame's pose is ambiguous, and the One Euro filter on the published pose),
+// and sparse (full-detection-interval=10: the frames between searches only look for the
+// tracked markers), beside AprilTag, which has no tracker and is the reference for jitter
+// and frame time. Per system, source (video, field), set (tuning, validation) and
+// condition:
+// - recall per frame, tracked and sparse, measured and predicted apart; a prediction counts as
 //   the marker only when its centre lies within the tolerance a detection is held to
 //   (score(): a quarter of the projected edge, at least 2 px), and wrong ids;
 // - wrong choices of the planar pose's two solutions (trial.hpp's wrong_choice, flipped);
 // - jitter: the clips' markers all move, so jitter is the error of the frame-to-frame
 //   change of the pose (measured change against the true change) between consecutive
 //   frames that both measured the marker, raw and smoothed;
-// - frame times, with their ratio to AprilTag 36h11 decimate 2's in the same run.
+// - frame times (sparse: all its frames, and those between searches apart), with their
+//   ratio to AprilTag 36h11 decimate 2's in the same run.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -47,28 +51,47 @@ double elapsed_ms(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-// One frame of an LFTag system: what per-frame detection gives (tracking off) and what
-// the tracker reports (tracking on), and what each cost. The only place the experiment
-// runs the detector and the tracker: when Detector::detect reads the tracker's expected
-// outlines first (and skips the full-frame search between full detections), this
-// function changes and the figures follow. Until then tracking on is the same detection
-// plus Tracker::update, so one detection serves both.
+// How often the sparse mode searches the whole frame (lftagdetect's
+// full-detection-interval): every tenth frame, a third of a second at 30 fps.
+constexpr int kSparseInterval = 10;
+
+// One frame of an LFTag system, the only place the experiment runs the detector and the
+// trackers: per-frame detection (tracking off); tracking on as lftagdetect runs it with
+// tracking=true (every frame searched, then the tracked markers the search missed read
+// where predicted, then Tracker::update); and the sparse mode of
+// full-detection-interval=kSparseInterval (the frames between searches only read the
+// tracked markers where predicted).
 struct TrackedFrame {
   std::vector<lftag::Detection> detections;   // tracking off
   std::vector<lftag::TrackedMarker> markers;  // tracking on: measured, then predicted
-  double detect_ms = 0, track_ms = 0;         // the detection, then Tracker::update
-  double off_ms() const { return detect_ms; }
-  double on_ms() const { return detect_ms + track_ms; }
+  std::vector<lftag::TrackedMarker> sparse;   // the sparse mode
+  bool searched = true;                       // whether the sparse mode searched this frame
+  double off_ms = 0, on_ms = 0, sparse_ms = 0;
 };
 
-TrackedFrame track_frame(lftag::Detector& detector, lftag::Tracker& tracker, const cv::Mat1b& frame, double t) {
+struct Trackers {
+  lftag::Tracker on, sparse;
+};
+
+std::vector<lftag::TrackedMarker> tracked(lftag::Detector& detector, lftag::Tracker& tracker, const cv::Mat1b& frame,
+                                          double t, bool full_search, double& ms) {
+  const auto start = std::chrono::steady_clock::now();
+  lftag::FrameHints hints;
+  hints.expected = tracker.expected(t);
+  hints.full_search = full_search || hints.expected.empty();
+  std::vector<lftag::TrackedMarker> out = tracker.update(t, detector.detect(lftag::ImageView(frame), hints));
+  ms = elapsed_ms(start);
+  return out;
+}
+
+TrackedFrame track_frame(lftag::Detector& detector, Trackers& trackers, const cv::Mat1b& frame, int f, double t) {
   TrackedFrame out;
   const auto start = std::chrono::steady_clock::now();
   out.detections = detector.detect(lftag::ImageView(frame));
-  out.detect_ms = elapsed_ms(start);
-  const auto tracked = std::chrono::steady_clock::now();
-  out.markers = tracker.update(t, out.detections);
-  out.track_ms = elapsed_ms(tracked);
+  out.off_ms = elapsed_ms(start);
+  out.markers = tracked(detector, trackers.on, frame, t, true, out.on_ms);
+  out.searched = f % kSparseInterval == 0 || trackers.sparse.expected(t).empty();
+  out.sparse = tracked(detector, trackers.sparse, frame, t, out.searched, out.sparse_ms);
   return out;
 }
 
@@ -118,11 +141,12 @@ struct Tally {
   int frames = 0, markers = 0;
   int found_off = 0, found_measured = 0, found_predicted = 0, predicted_off_target = 0;
   int wrong_off = 0, wrong_on = 0;
+  int found_sparse = 0, wrong_sparse = 0;  // the sparse mode: measured or predicted on target
   int with_pose_off = 0, wrong_choices_off = 0, flips_off = 0;
   int with_pose_on = 0, wrong_choices_on = 0, flips_on = 0;
   std::vector<double> prediction_error_px;
   Jitter off, tracked, smoothed;
-  std::vector<double> off_ms, on_ms;
+  std::vector<double> off_ms, on_ms, sparse_ms, unsearched_ms;  // the last: the sparse mode's frames between searches
   void append(const Tally& o) {
     frames += o.frames, markers += o.markers;
     found_off += o.found_off, found_measured += o.found_measured, found_predicted += o.found_predicted;
@@ -133,6 +157,9 @@ struct Tally {
     off.append(o.off), tracked.append(o.tracked), smoothed.append(o.smoothed);
     off_ms.insert(off_ms.end(), o.off_ms.begin(), o.off_ms.end());
     on_ms.insert(on_ms.end(), o.on_ms.begin(), o.on_ms.end());
+    sparse_ms.insert(sparse_ms.end(), o.sparse_ms.begin(), o.sparse_ms.end());
+    unsearched_ms.insert(unsearched_ms.end(), o.unsearched_ms.begin(), o.unsearched_ms.end());
+    found_sparse += o.found_sparse, wrong_sparse += o.wrong_sparse;
   }
 };
 
@@ -173,13 +200,13 @@ Tally run_clip(FiducialSystem& system, const RenderedClip& clip, int s) {
   Tally k;
   auto* lftag_system = dynamic_cast<LftagSystem*>(&system);
   std::optional<lftag::Detector> detector;
-  std::optional<lftag::Tracker> tracker;
+  std::optional<Trackers> trackers;
   const std::vector<cv::Mat1b>& images = clip.images[std::size_t(s)];
   const std::vector<std::string>& ids = clip.ids[std::size_t(s)];
   // The first call allocates and fills caches: one untimed call on the first frame.
   if (lftag_system) {
     detector.emplace(lftag_system->params_for(clip.camera, clip.tag_size));
-    tracker.emplace(tracker_params());
+    trackers.emplace(Trackers{lftag::Tracker(tracker_params()), lftag::Tracker(tracker_params())});
     detector->detect(lftag::ImageView(images[0]));
   } else {
     system.set_camera(clip.camera, clip.tag_size);
@@ -192,7 +219,7 @@ Tally run_clip(FiducialSystem& system, const RenderedClip& clip, int s) {
     std::vector<Detected> off, measured, predicted;
     std::vector<const lftag::TrackedMarker*> measured_tracks;
     if (lftag_system) {
-      const TrackedFrame frame = track_frame(*detector, *tracker, images[std::size_t(f)], t);
+      const TrackedFrame frame = track_frame(*detector, *trackers, images[std::size_t(f)], f, t);
       for (const lftag::Detection& d : frame.detections) off.push_back(to_detected(d));
       for (const lftag::TrackedMarker& m : frame.markers) {
         if (m.track.state == lftag::TrackState::measured)
@@ -202,8 +229,10 @@ Tally run_clip(FiducialSystem& system, const RenderedClip& clip, int s) {
       }
       for (const lftag::TrackedMarker& m : frame.markers)
         if (m.track.state == lftag::TrackState::measured) measured_tracks.push_back(&m);
-      k.off_ms.push_back(frame.off_ms());
-      k.on_ms.push_back(frame.on_ms());
+      k.off_ms.push_back(frame.off_ms);
+      k.on_ms.push_back(frame.on_ms);
+      k.sparse_ms.push_back(frame.sparse_ms);
+      if (!frame.searched) k.unsearched_ms.push_back(frame.sparse_ms);
       ++k.frames;
       // The measured poses and their smoothed ones, by marker (below).
       std::vector<cv::Point2d> centers;
@@ -214,6 +243,17 @@ Tally run_clip(FiducialSystem& system, const RenderedClip& clip, int s) {
       for (const Detected& d : predicted)
         if (std::find(ids.begin(), ids.end(), d.id) == ids.end()) all_on.push_back(d);  // a track of no marker
       k.wrong_on += wrong_ids(all_on, ids, centers, tolerances);
+      // The sparse mode: recall and wrong ids as tracking on's (a prediction counts on target).
+      std::vector<Detected> sparse, sparse_predicted;
+      for (const lftag::TrackedMarker& m : frame.sparse)
+        (m.track.state == lftag::TrackState::measured ? sparse : sparse_predicted).push_back(to_detected(m.detection));
+      std::vector<Detected> all_sparse = sparse;
+      for (const Detected& d : sparse_predicted)
+        if (std::find(ids.begin(), ids.end(), d.id) == ids.end()) all_sparse.push_back(d);  // a track of no marker
+      k.wrong_sparse += wrong_ids(all_sparse, ids, centers, tolerances);
+      sparse.insert(sparse.end(), sparse_predicted.begin(), sparse_predicted.end());
+      for (std::size_t m = 0; m < markers; ++m)
+        k.found_sparse += clip.visible[std::size_t(f)][m] && match(sparse, ids[m], centers[m], tolerances[m]) >= 0;
       for (std::size_t m = 0; m < markers; ++m) {
         const Pose& truth = clip.poses[std::size_t(f)][m];
         FramePoses now;
@@ -340,7 +380,8 @@ bool run_tracking(const Options& options) {
                "recall_per_frame_pct", "found_measured", "found_predicted", "recall_tracked_pct",
                "predicted_off_target", "median_prediction_error_px", "wrong_per_frame", "wrong_tracked",
                "with_pose_off", "wrong_choices_off", "flips_off", "wrong_choice_off_pct", "with_pose_on",
-               "wrong_choices_on", "flips_on", "wrong_choice_on_pct"});
+               "wrong_choices_on", "flips_on", "wrong_choice_on_pct", "found_sparse", "recall_sparse_pct",
+               "wrong_sparse"});
   Csv jitter(options.out / "tracking_jitter.csv",
              {"system", "family", "source", "set", "pose", "pairs", "mean_rotation_deg", "p95_rotation_deg",
               "p99_rotation_deg", "mean_translation_mm", "p95_translation_mm", "p99_translation_mm",
@@ -364,7 +405,8 @@ bool run_tracking(const Options& options) {
                   tracks ? k.wrong_on : kNaN, k.with_pose_off, k.wrong_choices_off, k.flips_off,
                   percent(k.wrong_choices_off, k.with_pose_off), tracks ? k.with_pose_on : kNaN,
                   tracks ? k.wrong_choices_on : kNaN, tracks ? k.flips_on : kNaN,
-                  tracks ? percent(k.wrong_choices_on, k.with_pose_on) : kNaN);
+                  tracks ? percent(k.wrong_choices_on, k.with_pose_on) : kNaN, tracks ? k.found_sparse : kNaN,
+                  tracks ? percent(k.found_sparse, k.markers) : kNaN, tracks ? k.wrong_sparse : kNaN);
       if (condition != "all") continue;
       auto jitter_row = [&](const char* pose, const Jitter& j) {
         jitter.row(names[s], family, source, set, pose, int(j.rotation_deg.size()), mean(j.rotation_deg),
@@ -386,7 +428,7 @@ bool run_tracking(const Options& options) {
                   mean(v) / peer_mean, quantile(v, 0.99) / peer_p99);
       };
       times_row(tracks ? "off" : "none", k.off_ms);
-      if (tracks) times_row("on", k.on_ms);
+      if (tracks) times_row("on", k.on_ms), times_row("sparse", k.sparse_ms), times_row("between-searches", k.unsearched_ms);
     }
   }
   return true;

@@ -61,7 +61,11 @@
  * last-seen, pose-flipped; lftag-meta.h), and a marker missed in a frame stays in the
  * meta, region metas and messages as "predicted" (moved by the track's
  * constant-velocity model) until #GstLFTagDetect:lost-after seconds have passed, so
- * that on-change messages post when a track starts or is lost. With
+ * that on-change messages post when a track starts or is lost. A tracked marker the
+ * search misses (blurred, shaken) is first read where its track predicts it, from the
+ * grey levels under the predicted outline, and taken only with the track's id; with
+ * #GstLFTagDetect:full-detection-interval N, only every Nth frame is searched in full
+ * and the frames between only read the tracked markers. With
  * #GstLFTagDetect:smoothing a One Euro filter's pose is published beside the raw one.
  *
  * Poses need the camera: #GstLFTagDetect:calibration-file (OpenCV YAML, XML or
@@ -151,6 +155,7 @@ enum {
   PROP_SMOOTHING,
   PROP_SMOOTHING_MIN_CUTOFF,
   PROP_SMOOTHING_BETA,
+  PROP_FULL_DETECTION_INTERVAL,
 };
 
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
@@ -164,6 +169,7 @@ enum {
 #define DEFAULT_PROP_MESSAGE_DETECTIONS FALSE
 #define DEFAULT_PROP_LATE_FRAMES GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE
 #define DEFAULT_PROP_TRACKING FALSE
+#define DEFAULT_PROP_FULL_DETECTION_INTERVAL 1
 /* The tracker's own parameters default to the library's (TrackerParams). */
 /* The detector's own parameters default to the library's (DetectorParams). */
 
@@ -241,6 +247,7 @@ struct Settings {
   bool message_detections = DEFAULT_PROP_MESSAGE_DETECTIONS;
   GstLFTagDetectLateFrames late_frames = DEFAULT_PROP_LATE_FRAMES;
   bool tracking = DEFAULT_PROP_TRACKING;
+  guint full_detection_interval = DEFAULT_PROP_FULL_DETECTION_INTERVAL;
   lftag::TrackerParams tracker;
 
   Settings() {
@@ -276,6 +283,7 @@ struct State {
   bool warned_deadline = false;          /* the first frame the deadline cut */
   std::optional<lftag::Tracker> tracker; /* with tracking: the stream's tracks */
   double track_time = 0;                 /* seconds: the last tracked frame's time */
+  guint unsearched = 0;                  /* with tracking: frames since the last full search */
 };
 
 /* Downstream's latest QoS report: frames due before `earliest` (running time) are
@@ -581,6 +589,15 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                           "metre per second of translation, per unit quaternion per second of rotation): "
                           "higher lags less behind a moving marker. 0: a fixed cutoff",
                           0.0, 1e6, track_defaults.beta, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_FULL_DETECTION_INTERVAL,
+      g_param_spec_uint("full-detection-interval", "Full detection interval",
+                        "With tracking: search the whole frame for markers every this many frames, and in "
+                        "between only read the tracked markers where their tracks predict them (a small "
+                        "fraction of a search's cost; new markers are then found at the next full search). A "
+                        "frame with no tracked marker is always searched. 1: every frame is searched, and "
+                        "tracked markers the search misses are still read where predicted",
+                        1, G_MAXINT, DEFAULT_PROP_FULL_DETECTION_INTERVAL, playing));
 
   gst_element_class_set_static_metadata(element_class, "LFTag detector", "Filter/Analyzer/Video",
                                         "Finds LFTag fiducial markers, decodes their ids and estimates their poses. "
@@ -734,6 +751,7 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
     case PROP_SMOOTHING: s.tracker.smoothing = g_value_get_boolean(value); break;
     case PROP_SMOOTHING_MIN_CUTOFF: s.tracker.min_cutoff = g_value_get_double(value); break;
     case PROP_SMOOTHING_BETA: s.tracker.beta = g_value_get_double(value); break;
+    case PROP_FULL_DETECTION_INTERVAL: s.full_detection_interval = g_value_get_uint(value); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
   GST_OBJECT_UNLOCK(self);
@@ -773,6 +791,7 @@ static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue
     case PROP_SMOOTHING: g_value_set_boolean(value, s.tracker.smoothing); break;
     case PROP_SMOOTHING_MIN_CUTOFF: g_value_set_double(value, s.tracker.min_cutoff); break;
     case PROP_SMOOTHING_BETA: g_value_set_double(value, s.tracker.beta); break;
+    case PROP_FULL_DETECTION_INTERVAL: g_value_set_uint(value, s.full_detection_interval); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
   GST_OBJECT_UNLOCK(self);
@@ -800,6 +819,7 @@ static gboolean gst_lftag_detect_start(GstBaseTransform* trans) {
   GST_OBJECT_UNLOCK(self);
   st.messages.reset();
   st.tracker.reset();
+  st.unsearched = 0;
   if (!lftag::gst::no_refused_values(GST_ELEMENT(self),
                                      {&s.families_error, &s.distortion_error, &s.cx_error, &s.cy_error}))
     return FALSE;
@@ -1080,12 +1100,13 @@ static void gst_lftag_detect_skip_late(GstLFTagDetect* self, GstBuffer* buffer, 
                    GST_STIME_ARGS(jitter), GST_TIME_ARGS(pts));
 }
 
-/* Tracking: the frame's detections become the tracked markers (measured ones, then
- * the predicted ones), `tracks` their tracks. The time is the buffer's timestamp (one
+/* Tracking, before the detection: the buffer's time for the tracker (its timestamp; one
  * going back, as after a seek, starts over; a gap longer than lost-after loses every
- * track); a buffer without one comes its duration, or 1/30 s, after the last. */
-static void gst_lftag_detect_track(GstLFTagDetect* self, const Settings& s, GstBuffer* buffer,
-                                   std::vector<Detection>& detections, std::vector<lftag::TrackInfo>& tracks) {
+ * track; a buffer without one comes its duration, or 1/30 s, after the last), and what
+ * the tracks expect in it: their markers where they predict them, and whether the whole
+ * frame is searched (every full-detection-interval frames, and whenever nothing is
+ * expected). */
+static lftag::FrameHints gst_lftag_detect_hints(GstLFTagDetect* self, const Settings& s, GstBuffer* buffer) {
   State& st = *self->state;
   if (!st.tracker)
     st.tracker.emplace(s.tracker);
@@ -1097,6 +1118,19 @@ static void gst_lftag_detect_track(GstLFTagDetect* self, const Settings& s, GstB
   else if (GST_BUFFER_DURATION_IS_VALID(buffer))
     time = st.track_time + double(GST_BUFFER_DURATION(buffer)) / GST_SECOND;
   st.track_time = time;
+  lftag::FrameHints hints;
+  hints.expected = st.tracker->expected(time);
+  hints.full_search = hints.expected.empty() || st.unsearched + 1 >= s.full_detection_interval;
+  st.unsearched = hints.full_search ? 0 : st.unsearched + 1;
+  return hints;
+}
+
+/* Tracking, after the detection: the frame's detections become the tracked markers
+ * (the measured ones, then the predicted ones), `tracks` their tracks. */
+static void gst_lftag_detect_track(GstLFTagDetect* self, std::vector<Detection>& detections,
+                                   std::vector<lftag::TrackInfo>& tracks) {
+  State& st = *self->state;
+  const double time = st.track_time;
   std::vector<lftag::TrackedMarker> markers = st.tracker->update(time, detections);
   for (const lftag::TrackedMarker& m : st.tracker->lost())
     GST_DEBUG_OBJECT(self, "track %" G_GUINT64_FORMAT " (%s) lost at %.3f s, unseen since %.3f s", m.track.id,
@@ -1162,10 +1196,15 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
     lftag::gst::attach_unanalysed(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info));
     return GST_FLOW_OK;
   }
+  if (!s.tracking && st.tracker) {
+    GST_DEBUG_OBJECT(self, "tracking switched off: %" G_GSIZE_FORMAT " tracks ended", st.tracker->size());
+    st.tracker.reset();
+  }
+  const lftag::FrameHints hints = s.tracking ? gst_lftag_detect_hints(self, s, buffer) : lftag::FrameHints{};
   std::vector<Detection> detections;
   lftag::DetectionStats stats;
   try {
-    detections = st.detector->detect(gst_lftag_detect_luma(st, &frame), &stats);
+    detections = st.detector->detect(gst_lftag_detect_luma(st, &frame), hints, &stats);
   } catch (const std::exception& e) {
     gst_video_frame_unmap(&frame);
     GST_WARNING_OBJECT(self, "detection failed on %" GST_PTR_FORMAT ", passed on unanalysed: %s", buffer, e.what());
@@ -1174,8 +1213,11 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
   }
   gst_video_frame_unmap(&frame);
   ++st.analysed;
-  GST_LOG_OBJECT(self, "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT, detections.size(),
-                 GST_TIME_ARGS(GST_BUFFER_PTS(buffer)));
+  GST_LOG_OBJECT(self,
+                 "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT " (%s; %" G_GINT64_FORMAT " of %" G_GSIZE_FORMAT
+                 " tracked markers read where predicted)",
+                 detections.size(), GST_TIME_ARGS(GST_BUFFER_PTS(buffer)),
+                 hints.full_search ? "searched" : "not searched", stats.expected_found, hints.expected.size());
   if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0 || stats.outline_reads_skipped > 0) &&
       !st.warned_budget) {
     const std::string text = gst_lftag_detect_budget_text(stats, st.detector->params());
@@ -1201,12 +1243,7 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
   }
 
   std::vector<lftag::TrackInfo> tracks;
-  if (s.tracking) {
-    gst_lftag_detect_track(self, s, buffer, detections, tracks);
-  } else if (st.tracker) {
-    GST_DEBUG_OBJECT(self, "tracking switched off: %" G_GSIZE_FORMAT " tracks ended", st.tracker->size());
-    st.tracker.reset();
-  }
+  if (s.tracking) gst_lftag_detect_track(self, detections, tracks);
   const std::vector<lftag::TrackInfo>* tracked = s.tracking ? &tracks : nullptr;
 
   lftag::gst::attach_detections(buffer, GST_VIDEO_INFO_WIDTH(info), GST_VIDEO_INFO_HEIGHT(info), detections, tracked);

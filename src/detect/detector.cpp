@@ -71,7 +71,7 @@ void DetectorParams::validate() const {
 
 double DetectionStats::total_ms() const {
   return threshold_ms + regions_ms + candidates_ms + keypoints_ms + hypotheses_ms + decode_ms + pose_ms +
-         second_look_ms;
+         second_look_ms + expected_ms;
 }
 
 DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
@@ -79,9 +79,10 @@ DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   angle += o.angle, collinearity += o.collinearity, residual += o.residual, unambiguous += o.unambiguous;
   decoded += o.decoded, second_looks += o.second_looks, second_look_found += o.second_look_found;
   outline_reads += o.outline_reads, outline_found += o.outline_found, outline_reads_skipped += o.outline_reads_skipped;
+  expected_reads += o.expected_reads, expected_found += o.expected_found;
   skipped_by_budget += o.skipped_by_budget, second_looks_skipped += o.second_looks_skipped;
   past_deadline += o.past_deadline, skipped_by_deadline += o.skipped_by_deadline;
-  second_look_ms += o.second_look_ms;
+  second_look_ms += o.second_look_ms, expected_ms += o.expected_ms;
   threshold_ms += o.threshold_ms, regions_ms += o.regions_ms, candidates_ms += o.candidates_ms;
   keypoints_ms += o.keypoints_ms, hypotheses_ms += o.hypotheses_ms, decode_ms += o.decode_ms, pose_ms += o.pose_ms;
   return *this;
@@ -222,9 +223,108 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     else if (already_found(found, det.center)) outcome = Stage::duplicate;
     if (trace) trace->verdicts.back().stage = outcome;
     if (outcome != Stage::detected) continue;
-    stats.second_look_found += second_look;
     found.push_back(std::move(det));
   }
+}
+
+// The detection of an accepted outline reading: posed from the squares' centres under
+// the aligned outline, which is where the pose's perspective correction expects a blob's
+// centroid. None when no pose could be computed.
+std::optional<Detection> outline_detection(const detail::OutlineReading& reading, const Family& f, const Camera& camera,
+                                           const DetectorParams& p) {
+  detail::Candidate c;
+  c.family = f;
+  detail::Decoding d;
+  d.id = reading.id;
+  d.homography = reading.homography;
+  std::vector<cv::Point2d> observed;
+  for (int g = 0; g < f.cell_count(); ++g) {
+    const UnitRect s = f.square(g, f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g)));
+    std::vector<cv::Point2d> square = {{s.x, s.y}, {s.x + s.width, s.y}, {s.x + s.width, s.y + s.height},
+                                       {s.x, s.y + s.height}};
+    cv::perspectiveTransform(square, square, reading.homography);
+    observed.push_back(detail::polygon_centroid(square));
+    d.blob_of_cell.push_back(g);
+  }
+  const std::vector<cv::Point2d> ideal = camera.undistort(observed);
+  for (int g = 0; g < f.cell_count(); ++g) {
+    detail::Blob b;
+    b.centroid = observed[g], b.point = ideal[g];
+    c.blobs.push_back(b);
+  }
+  Detection det;
+  det.family = f;
+  det.id = d.id;
+  det.centroids = observed;
+  det.from_outline = true;
+  det.noise_margin = reading.noise_margin;
+  const std::array<int, 4> keypoint_cells = f.keypoint_cells();
+  for (int i = 0; i < 4; ++i) det.keypoints[i] = observed[keypoint_cells[i]];
+  if (!detail::estimate_pose(c, d, camera, p, det)) return std::nullopt;
+  return det;
+}
+
+// One outline read from `outline` (the frame's bound of reads and its deadline allowing,
+// counted in `reads`), recorded in the trace; the reading when it passed every check (the
+// trace's stage is then `detected` until the caller says otherwise).
+std::optional<detail::OutlineReading> read_one_outline(const ImageView& work, const std::array<cv::Point2d, 4>& outline,
+                                                       const Family& f, const DetectorParams& p,
+                                                       const detail::Deadline& deadline, DetectionStats& stats,
+                                                       std::int64_t& reads, int& reads_left,
+                                                       detail::ReadPlaces& read_places, OutlineVerdict* verdict) {
+  if (verdict) verdict->family = f, verdict->outline = outline;
+  if (reads_left <= 0) {
+    ++stats.outline_reads_skipped;
+    if (verdict) verdict->stage = Stage::budget;
+    return std::nullopt;
+  }
+  if (deadline.passed()) {
+    ++stats.skipped_by_deadline;
+    if (verdict) verdict->stage = Stage::deadline;
+    return std::nullopt;
+  }
+  --reads_left;
+  ++reads;
+  std::optional<detail::OutlineReading> reading =
+      detail::read_outline(work, outline, f, p.min_pixels_per_unit, deadline, &read_places);
+  const Stage stage = reading ? detail::outline_stage(*reading, p) : Stage::alignment;
+  if (stage == Stage::deadline) ++stats.skipped_by_deadline;
+  if (verdict) {
+    verdict->stage = stage;
+    if (reading) {
+      if (reading->read) verdict->reading = reading->id;
+      verdict->correlation = reading->correlation, verdict->marker_correlation = reading->marker_correlation;
+      verdict->contrast = reading->contrast, verdict->margin = reading->margin;
+      verdict->noise_margin = reading->noise_margin, verdict->evidence = reading->evidence;
+      verdict->pixels_per_unit = reading->pixels_per_unit, verdict->smear = reading->smear;
+      verdict->defocus = reading->defocus;
+    }
+  }
+  if (stage != Stage::detected) return std::nullopt;
+  return reading;
+}
+
+// A second look's working state, kept from patch to patch and frame to frame.
+struct PatchLook {
+  detail::Patch patch;
+  detail::BinaryImage binary;
+  detail::RegionTree tree;
+  std::vector<detail::Candidate> candidates;
+};
+
+// The patch around `box` looked at again: enlarged as `look` says, binarised at its own
+// midpoint and labelled, its candidates in `out.candidates` (within the budget left). False
+// when the patch is empty.
+bool look_at_patch(const ImageView& image, cv::Rect box, const detail::SecondLook& look, const DetectorParams& p,
+                   const Camera& camera, detail::RegionLabeller& labeller, PatchLook& out, DetectionStats& stats,
+                   int* budget_left, std::vector<detail::Candidate>* area_rejected,
+                   std::vector<detail::Candidate>* skipped) {
+  if (!detail::enlarge_patch(image, box, look, out.patch)) return false;
+  detail::binarise_patch(out.patch, 0.5, out.binary);
+  labeller.label(out.binary, out.tree);
+  detail::find_candidates(out.tree, out.binary, ImageView(out.patch.grey), p, camera, out.candidates, stats,
+                          out.patch.frame, area_rejected, budget_left, skipped);
+  return true;
 }
 
 // The marker in a second look's patch whose squares its binary image could not separate:
@@ -237,82 +337,97 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
                    detail::ReadPlaces& read_places, DetectionTrace* trace) {
   for (const std::array<cv::Point2d, 4>& outline : detail::coarse_outlines(binary, frame))
     for (const Family& f : p.families) {
-      OutlineVerdict* verdict = nullptr;
-      if (trace) {
-        verdict = &trace->outline_reads.emplace_back();
-        verdict->family = f, verdict->outline = outline;
-      }
-      if (reads_left <= 0) {
-        ++stats.outline_reads_skipped;
-        if (verdict) verdict->stage = Stage::budget;
-        continue;
-      }
-      if (deadline.passed()) {
-        ++stats.skipped_by_deadline;
-        if (verdict) verdict->stage = Stage::deadline;
-        continue;
-      }
-      --reads_left;
-      ++stats.outline_reads;
-      const std::optional<detail::OutlineReading> reading =
-          detail::read_outline(work, outline, f, p.min_pixels_per_unit, deadline, &read_places);
-      const Stage stage = reading ? detail::outline_stage(*reading, p) : Stage::alignment;
-      if (stage == Stage::deadline) ++stats.skipped_by_deadline;
-      if (verdict) {
-        verdict->stage = stage;
-        if (reading) {
-          if (reading->read) verdict->reading = reading->id;
-          verdict->correlation = reading->correlation, verdict->marker_correlation = reading->marker_correlation;
-          verdict->contrast = reading->contrast, verdict->margin = reading->margin;
-          verdict->noise_margin = reading->noise_margin, verdict->evidence = reading->evidence;
-          verdict->pixels_per_unit = reading->pixels_per_unit, verdict->smear = reading->smear;
-          verdict->defocus = reading->defocus;
-        }
-      }
-      if (stage != Stage::detected) continue;
-      // Blobs at the centroids of the squares under the homography, which is what the
-      // pose's perspective correction expects of a blob.
-      detail::Candidate c;
-      c.family = f;
-      detail::Decoding d;
-      d.id = reading->id;
-      d.homography = reading->homography;
-      std::vector<cv::Point2d> observed;
-      for (int g = 0; g < f.cell_count(); ++g) {
-        const UnitRect s = f.square(g, f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g)));
-        std::vector<cv::Point2d> square = {{s.x, s.y}, {s.x + s.width, s.y}, {s.x + s.width, s.y + s.height},
-                                           {s.x, s.y + s.height}};
-        cv::perspectiveTransform(square, square, reading->homography);
-        observed.push_back(detail::polygon_centroid(square));
-        d.blob_of_cell.push_back(g);
-      }
-      const std::vector<cv::Point2d> ideal = camera.undistort(observed);
-      for (int g = 0; g < f.cell_count(); ++g) {
-        detail::Blob b;
-        b.centroid = observed[g], b.point = ideal[g];
-        c.blobs.push_back(b);
-      }
-      Detection det;
-      det.family = f;
-      det.id = d.id;
-      det.centroids = observed;
-      det.from_outline = true;
-      det.noise_margin = reading->noise_margin;
-      const std::array<int, 4> keypoint_cells = f.keypoint_cells();
-      for (int i = 0; i < 4; ++i) det.keypoints[i] = observed[keypoint_cells[i]];
-      if (!detail::estimate_pose(c, d, camera, p, det)) {
+      OutlineVerdict* verdict = trace ? &trace->outline_reads.emplace_back() : nullptr;
+      const std::optional<detail::OutlineReading> reading = read_one_outline(
+          work, outline, f, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict);
+      if (!reading) continue;
+      std::optional<Detection> det = outline_detection(*reading, f, camera, p);
+      if (!det) {
         if (verdict) verdict->stage = Stage::pose;
         continue;
       }
-      if (already_found(found, det.center)) {
+      if (already_found(found, det->center)) {
         if (verdict) verdict->stage = Stage::duplicate;
         continue;
       }
       ++stats.decoded, ++stats.second_look_found, ++stats.outline_found;
       read_places.add(f.n(), reading->homography, f, reading->pixels_per_unit);
-      found.push_back(std::move(det));
+      found.push_back(std::move(*det));
       return;  // one marker to a patch
     }
+}
+
+// The markers the caller expects (FrameHints::expected) that the search did not find,
+// each looked for where it is expected: a second look at the place (its squares found
+// and decoded as the search's are, wherever in the patch the marker has moved), then the
+// grey levels under the expected outline read (a marker whose squares the blur merged).
+// Each is taken only as the family and id expected: another id there is refused (a
+// marker that crossed the expected one, which the search finds by itself, or a
+// misreading: a wrong id is worse than a miss). The outline reads are bounded as the
+// second look's are (detail::kMaxOutlineReads a frame), and all of it by the deadline.
+void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView& work, const Camera& camera,
+                   const DetectorParams& p, const detail::Deadline& deadline, detail::RegionLabeller& labeller,
+                   PatchLook& patch_look, int* budget_left, DetectionStats& stats, std::vector<Detection>& found,
+                   detail::ReadPlaces& read_places, DetectionTrace* trace) {
+  int reads_left = detail::kMaxOutlineReads;
+  const auto is_expected = [](const ExpectedMarker& e, const Detection& d) {
+    return d.family == e.family && d.id == e.id;
+  };
+  for (const ExpectedMarker& e : expected) {
+    const bool sought = std::find(p.families.begin(), p.families.end(), e.family) != p.families.end();
+    const bool present =
+        std::any_of(found.begin(), found.end(), [&](const Detection& d) { return is_expected(e, d); });
+    if (!sought || present) continue;
+    if (deadline.passed()) {
+      ++stats.skipped_by_deadline;
+      continue;
+    }
+    ++stats.expected_reads;
+    // The patch: the expected outline's box and a quarter of its side all round (the
+    // patch adds as much again), room for a prediction that is off by a few units.
+    cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>(e.corners.begin(), e.corners.end()));
+    const int grow = std::max(box.width, box.height) / 4;
+    box = cv::Rect(box.x - grow, box.y - grow, box.width + 2 * grow, box.height + 2 * grow);
+    detail::SecondLook look;
+    look.sought.reset().set(e.family.n());
+    if (!budget_left || *budget_left > 0) {
+      std::vector<Detection> local;
+      if (look_at_patch(work, box, look, p, camera, labeller, patch_look, stats, budget_left, nullptr, nullptr))
+        decode_candidates(patch_look.candidates, work, camera, p, true, deadline, stats, trace, local);
+      const auto it = std::find_if(local.begin(), local.end(), [&](const Detection& d) { return is_expected(e, d); });
+      const bool taken = it != local.end() && !already_found(found, it->center);
+      stats.decoded -= std::int64_t(local.size()) - taken;  // the others are not detections
+      if (taken) {
+        ++stats.expected_found;
+        found.push_back(std::move(*it));
+        continue;
+      }
+    }
+    OutlineVerdict* verdict = nullptr;
+    if (trace) {
+      verdict = &trace->outline_reads.emplace_back();
+      verdict->expected = true;
+    }
+    const std::optional<detail::OutlineReading> reading = read_one_outline(
+        work, e.corners, e.family, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict);
+    if (!reading) continue;
+    if (reading->id != e.id) {
+      if (verdict) verdict->stage = Stage::unexpected;
+      continue;
+    }
+    std::optional<Detection> det = outline_detection(*reading, e.family, camera, p);
+    if (!det) {
+      if (verdict) verdict->stage = Stage::pose;
+      continue;
+    }
+    if (already_found(found, det->center)) {
+      if (verdict) verdict->stage = Stage::duplicate;
+      continue;
+    }
+    ++stats.decoded, ++stats.expected_found, ++stats.outline_found;
+    read_places.add(e.family.n(), reading->homography, e.family, reading->pixels_per_unit);
+    found.push_back(std::move(*det));
+  }
 }
 
 }  // namespace
@@ -335,6 +450,7 @@ const char* stage_name(Stage stage) {
     case Stage::ink: return "ink";
     case Stage::marker: return "marker";
     case Stage::smear: return "smear";
+    case Stage::unexpected: return "unexpected";
     case Stage::pose: return "pose";
     case Stage::duplicate: return "duplicate";
     case Stage::detected: return "detected";
@@ -349,10 +465,7 @@ struct Detector::Impl {
   detail::RegionLabeller labeller;
   detail::RegionTree tree;
   std::vector<detail::Candidate> candidates, area_rejected, skipped;
-  // The second look's patch and its binary image and tree.
-  detail::Patch patch;
-  detail::BinaryImage patch_binary;
-  detail::RegionTree patch_tree;
+  PatchLook patch_look;  // the second look's and the expected markers' patches
   Camera camera;  // for the last frame size
   cv::Size camera_size;
 
@@ -376,6 +489,11 @@ Detector& Detector::operator=(Detector&&) noexcept = default;
 const DetectorParams& Detector::params() const { return impl_->params; }
 
 std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* stats_out, DetectionTrace* trace) {
+  return detect(image, FrameHints{}, stats_out, trace);
+}
+
+std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints& hints, DetectionStats* stats_out,
+                                        DetectionTrace* trace) {
   if (image.width < 0 || image.height < 0) throw std::invalid_argument("image size must not be negative");
   if (!image.empty() && (image.data == nullptr || image.stride < image.width))
     throw std::invalid_argument("image has no pixels or a stride shorter than its width");
@@ -390,6 +508,17 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   auto start = Clock::now();
   const detail::Deadline deadline(detail::Deadline::thread_time(), p.deadline_ms);
   const Camera& camera = s.camera_for(image.width, image.height);
+  detail::ReadPlaces read_places;  // where this frame's outline readings found markers
+  if (!hints.full_search) {
+    int budget = p.max_candidates;
+    read_expected(hints.expected, image, camera, p, deadline, s.labeller, s.patch_look,
+                  p.max_candidates > 0 ? &budget : nullptr, stats, found, read_places, trace);
+    stats.expected_ms = elapsed_ms(start);
+    stats.past_deadline = stats.skipped_by_deadline > 0 ? 1 : 0;
+    if (trace) trace->detections = found;
+    if (stats_out) *stats_out += stats;
+    return found;
+  }
   detail::threshold_mean(image, p.threshold_window, p.threshold_offset, s.mean, s.binary);
   stats.threshold_ms = elapsed_ms(start);
   if (trace) trace->binary = s.binary.to_mat();
@@ -416,10 +545,16 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
   // The frame's own candidates are examined whatever the deadline (the budget bounds
   // them), so that a slow machine still finds every sharp marker.
   decode_candidates(s.candidates, image, camera, p, false, {}, stats, trace, found);
+  // The expected markers the search missed, before the second look (which then leaves
+  // the places of those found alone): optional work, like it.
+  start = Clock::now();
+  const std::int64_t skipped_before = stats.skipped_by_deadline;
+  read_expected(hints.expected, image, camera, p, deadline, s.labeller, s.patch_look, budget_left, stats, found,
+                read_places, trace);
+  stats.expected_ms = elapsed_ms(start);
 
   // The second look, around clusters that no detection covers: the optional work the
   // deadline cuts (not sought at all once it has passed).
-  const std::int64_t skipped_before = stats.skipped_by_deadline;
   bool cut = false;
   if (p.second_look && deadline.passed()) cut = true;
   if (p.second_look && !cut) {
@@ -432,7 +567,6 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
     std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, image, look, taken);
     int outline_reads_left = detail::kMaxOutlineReads;
-    detail::ReadPlaces read_places;  // where this frame's outline readings found markers
     if (int(boxes.size()) > p.max_second_looks) {
       stats.second_looks_skipped += std::int64_t(boxes.size()) - p.max_second_looks;
       boxes.resize(p.max_second_looks);
@@ -450,24 +584,19 @@ std::vector<Detection> Detector::detect(const ImageView& image, DetectionStats* 
       const cv::Rect& box = boxes[i];
       start = Clock::now();
       ++stats.second_looks;
-      if (!detail::enlarge_patch(image, box, look, s.patch)) {
-        stats.second_look_ms += elapsed_ms(start);
-        continue;
-      }
-      detail::binarise_patch(s.patch, 0.5, s.patch_binary);
-      s.labeller.label(s.patch_binary, s.patch_tree);
-      detail::find_candidates(s.patch_tree, s.patch_binary, ImageView(s.patch.grey), p, camera, s.candidates, stats,
-                              s.patch.frame, trace ? &s.area_rejected : nullptr, budget_left,
-                              trace ? &s.skipped : nullptr);
+      const bool looked = look_at_patch(image, box, look, p, camera, s.labeller, s.patch_look, stats, budget_left,
+                                        trace ? &s.area_rejected : nullptr, trace ? &s.skipped : nullptr);
       stats.second_look_ms += elapsed_ms(start);
+      if (!looked) continue;
       if (trace) trace->second_looks.push_back(box);
       record_rejected(true);
       const std::size_t before = found.size();
-      decode_candidates(s.candidates, image, camera, p, true, deadline, stats, trace, found);
+      decode_candidates(s.patch_look.candidates, image, camera, p, true, deadline, stats, trace, found);
+      stats.second_look_found += std::int64_t(found.size() - before);
       if (found.size() == before) {
         start = Clock::now();
-        read_outlines(s.patch_binary, s.patch.frame, image, camera, p, deadline, stats, found, outline_reads_left,
-                      read_places, trace);
+        read_outlines(s.patch_look.binary, s.patch_look.patch.frame, image, camera, p, deadline, stats, found,
+                      outline_reads_left, read_places, trace);
         stats.second_look_ms += elapsed_ms(start);
       }
     }

@@ -288,4 +288,14 @@ std::vector<TrackedMarker> Tracker::predict(double time) const {
   return out;
 }
 
+std::vector<ExpectedMarker> Tracker::expected(double time) const {
+  std::vector<ExpectedMarker> out;
+  if (started_ && time < last_time_) return out;
+  for (const Track& t : tracks_) {
+    const Detection d = predicted(t, time).detection;
+    out.push_back({d.family, d.id, d.corners});
+  }
+  return out;
+}
+
 }  // namespace lftag

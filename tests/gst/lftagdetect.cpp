@@ -1975,6 +1975,29 @@ GST_START_TEST(test_tracking_crossing_markers) {
 }
 GST_END_TEST;
 
+// With full-detection-interval=4 only every fourth frame is searched: in the frames
+// between, a tracked marker is looked for where its track predicts it (and measured there,
+// where it is), and a marker that appears is found at the next search, not before.
+GST_START_TEST(test_tracking_full_detection_interval) {
+  TrackingRun run("tracking=true full-detection-interval=4");
+  for (int f = 0; f < 9; ++f) {
+    const lftag::SceneMarker moving = tracked_marker(1234, -0.5 + 0.04 * f), still = tracked_marker(42, 0.5, 3.0);
+    std::vector<lftag::SceneMarker> markers{moving};
+    if (f >= 1) markers.insert(markers.begin(), still);  // far to near, as the renderer draws them
+    const FrameDetections found = run.push(markers);
+    fail_unless_equals_int(found.detections.size(), f < 4 ? 1 : 2);
+    for (std::size_t i = 0; i < found.detections.size(); ++i) {
+      const Detection& d = found.detections[i];
+      const lftag::SceneMarker& m = d.id == lftag::TagId(1234) ? moving : still;
+      fail_unless(d.id == m.id, "frame %d: id %s", f, d.id.to_decimal().c_str());
+      fail_unless(found.tracks[i] && found.tracks[i]->state == lftag::TrackState::measured, "frame %d: not measured", f);
+      const double off = cv::norm(d.center - lftag::make_truth(run.renderer.params().camera, m).center);
+      fail_unless(off < 0.5, "frame %d: centre %.2f px off", f, off);
+    }
+  }
+}
+GST_END_TEST;
+
 // The tracking properties: defaults, ranges, and a smoothed pose beside the raw one.
 GST_START_TEST(test_tracking_properties) {
   GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
@@ -1989,6 +2012,12 @@ GST_START_TEST(test_tracking_properties) {
   ASSERT_WARNING(g_object_set(e, "smoothing-beta", -1.0, nullptr));
   g_object_get(e, "lost-after", &lost_after, "smoothing-min-cutoff", &min_cutoff, "smoothing-beta", &beta, nullptr);
   fail_unless(lost_after == 0.5 && min_cutoff == 1.0 && beta == 1.0, "a refused value changed the property");
+  guint interval = 0;
+  g_object_get(e, "full-detection-interval", &interval, nullptr);
+  fail_unless_equals_int(interval, 1);  // every frame searched
+  ASSERT_WARNING(g_object_set(e, "full-detection-interval", 0u, nullptr));
+  g_object_get(e, "full-detection-interval", &interval, nullptr);
+  fail_unless_equals_int(interval, 1);
   gst_object_unref(e);
 
   TrackingRun run("tracking=true smoothing=true smoothing-beta=0");
@@ -2056,6 +2085,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_tracking_reports_loss);
   tcase_add_test(tc, test_tracking_crossing_markers);
   tcase_add_test(tc, test_tracking_properties);
+  tcase_add_test(tc, test_tracking_full_detection_interval);
   return s;
 }
 

@@ -91,6 +91,26 @@ TEST(Tracker, PredictsAMissedMarkerAtConstantVelocity) {
   EXPECT_EQ(tracker.size(), 1u);
 }
 
+// What the tracks expect in the next frame (FrameHints::expected): each live track's
+// family, id and predicted outline; nothing for a time before the last frame's.
+TEST(Tracker, ExpectedMarkersAreTheTracksPredictions) {
+  Tracker tracker;
+  const cv::Point2d velocity(4, 3);
+  for (int f = 0; f < 3; ++f)
+    tracker.update(f * kFrame, {square(TagId(7), cv::Point2d(100, 200) + f * velocity),
+                                square(TagId(9), cv::Point2d(300, 50), 60)});
+  const std::vector<ExpectedMarker> expected = tracker.expected(3 * kFrame);
+  ASSERT_EQ(expected.size(), 2u);
+  const Detection truth = square(TagId(7), cv::Point2d(100, 200) + 3 * velocity);
+  EXPECT_EQ(expected[0].id, TagId(7));
+  EXPECT_EQ(expected[0].family, Family(3));
+  for (int k = 0; k < 4; ++k) EXPECT_NEAR(cv::norm(expected[0].corners[k] - truth.corners[k]), 0, 1e-6);
+  EXPECT_EQ(expected[1].id, TagId(9));
+  EXPECT_NEAR(cv::norm(expected[1].corners[2] - cv::Point2d(360, 110)), 0, 1e-6);
+  EXPECT_TRUE(tracker.expected(kFrame).empty());  // before the last frame: update() starts over there
+  EXPECT_EQ(tracker.size(), 2u);
+}
+
 // A turning marker's rotation is extrapolated at its rate of turn.
 TEST(Tracker, PredictsRotation) {
   Tracker tracker;

@@ -224,6 +224,28 @@ struct Detection {
   bool from_outline = false;
 };
 
+// A marker the caller expects in a frame, and where: a track's prediction
+// (Tracker::expected). It is read from the grey levels under that outline, as a far or
+// blurred marker is (Detection::from_outline), and taken only with the id expected.
+struct ExpectedMarker {
+  Family family{3};
+  TagId id;
+  std::array<cv::Point2d, 4> corners;  // outer border corners, clockwise on screen, frame pixels
+};
+
+// What the caller knows of a frame before it is searched.
+struct FrameHints {
+  // Looked for where expected once the frame's own candidates are decoded, unless the
+  // search found them already: a marker that a motion blur or a shake keeps from being
+  // found by its squares is still read where its track puts it.
+  std::vector<ExpectedMarker> expected;
+  // Search the whole frame (the topological path and the second look). False: only read
+  // the expected markers, which costs a small fraction of a search; new markers are then
+  // not found, so a caller searches in full every few frames (lftagdetect's
+  // full-detection-interval).
+  bool full_search = true;
+};
+
 // Per-stage counts and times, and what the stages saw: lftag/trace.hpp.
 struct DetectionStats;
 struct DetectionTrace;
@@ -245,6 +267,10 @@ class Detector {
   // replaced by this frame's.
   // Not thread-safe on one Detector (see the top of this file); `image` is only read.
   std::vector<Detection> detect(const ImageView& image, DetectionStats* stats = nullptr,
+                                DetectionTrace* trace = nullptr);
+  // The same, with what the caller knows of the frame (expected markers of families not
+  // in params().families are not looked for).
+  std::vector<Detection> detect(const ImageView& image, const FrameHints& hints, DetectionStats* stats = nullptr,
                                 DetectionTrace* trace = nullptr);
 
  private:

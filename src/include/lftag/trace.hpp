@@ -37,6 +37,8 @@ struct DetectionStats {
   std::int64_t outline_reads = 0;      // outlines aligned and read where a patch gave no candidate
   std::int64_t outline_found = 0;      // detections read from outlines
   std::int64_t outline_reads_skipped = 0;  // outline reads not made: the frame's bound (32) was reached
+  std::int64_t expected_reads = 0;     // expected markers (FrameHints) looked for where expected
+  std::int64_t expected_found = 0;     // detections found so
   std::int64_t skipped_by_budget = 0;  // candidates not decoded: DetectorParams::max_candidates was spent
   std::int64_t second_looks_skipped = 0;  // clusters not looked at again: max_second_looks or the budget
   std::int64_t past_deadline = 0;         // frames whose deadline (DetectorParams::deadline_ms) cut their second looks
@@ -51,6 +53,7 @@ struct DetectionStats {
   double decode_ms = 0;                // decoding
   double pose_ms = 0;                  // final pose
   double second_look_ms = 0;           // finding, enlarging, binarising and labelling the patches
+  double expected_ms = 0;              // reading the expected markers (FrameHints)
   double total_ms() const;
   DetectionStats& operator+=(const DetectionStats& other);
 };
@@ -75,6 +78,7 @@ enum class Stage {
   ink,           // the squares' ink did not match the design on any side
   marker,        // outline read: the whole marker of the id read fitted under 0.75
   smear,         // outline read: a motion blur longer than 5 units (cells look alike)
+  unexpected,    // read where a marker was expected (FrameHints), as another id or family
   pose,          // no pose could be computed
   duplicate,     // a marker already found at its place
   detected,
@@ -92,10 +96,12 @@ struct CandidateVerdict {
   double noise_margin = 0;                  // of that reading, once accepted
 };
 
-// One outline read of a second look (a marker whose squares its binary image could not
-// separate, read from the grey levels under its aligned outline) and its fate.
+// One outline read (a marker whose squares a second look's binary image could not
+// separate, or one expected there, read from the grey levels under its aligned outline)
+// and its fate.
 struct OutlineVerdict {
   Family family{3};
+  bool expected = false;                 // a read where the caller expected a marker (FrameHints)
   std::array<cv::Point2d, 4> outline{};  // the coarse outline read from, frame pixels
   Stage stage = Stage::detected;
   std::optional<TagId> reading;          // the id read, when reading ran

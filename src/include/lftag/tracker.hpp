@@ -121,6 +121,10 @@ class Tracker {
   const std::vector<TrackedMarker>& lost() const { return lost_; }
   // Where every live track is predicted at `time`, without changing anything.
   std::vector<TrackedMarker> predict(double time) const;
+  // The markers of the live tracks, where they are predicted at `time`, for the detector
+  // to look for first (FrameHints::expected); none for a time before the last frame's
+  // (update() starts over there).
+  std::vector<ExpectedMarker> expected(double time) const;
   std::size_t size() const { return tracks_.size(); }
   // Ends every track without reporting it (a new stream).
   void reset();

@@ -233,6 +233,7 @@ struct Options : DetectorOptions {
   bool tracking = false;
   double lost_after = 0.5;  // lftagdetect's lost-after default (lftag::TrackerParams)
   bool smoothing = false;
+  unsigned full_detection_interval = 1;  // lftagdetect's default: every frame searched
 };
 
 // "outline,id,axes" (or with '+', or "none") as the overlay property's flags.
@@ -414,7 +415,8 @@ void Annotator::build() {
   set(detect, "max-candidates", std::to_string(o_.max_candidates));
   g_object_set(detect, "deadline", o_.deadline_ms, nullptr);
   if (o_.tracking)
-    g_object_set(detect, "tracking", TRUE, "lost-after", o_.lost_after, "smoothing", gboolean(o_.smoothing), nullptr);
+    g_object_set(detect, "tracking", TRUE, "lost-after", o_.lost_after, "smoothing", gboolean(o_.smoothing),
+                 "full-detection-interval", guint(o_.full_detection_interval), nullptr);
   if (!o_.calibration.empty()) g_object_set(detect, "calibration-file", o_.calibration.c_str(), nullptr);
   // Only the options given: the element's own "not set" (0 for fx and fy, -1 for cx and
   // cy) never stands for a value.
@@ -948,6 +950,11 @@ void add_annotate_command(CLI::App& app, int& status) {
   cmd->add_flag("--smoothing", opt->smoothing,
                 "With --tracking: a One Euro filter on each track's pose, written as the track's "
                 "\"smoothed_pose\" beside the raw one");
+  cmd->add_option("--full-detection-interval", opt->full_detection_interval,
+                  "With --tracking: search the whole frame every N frames, and in between only read the tracked "
+                  "markers where their tracks predict them (much faster; new markers are found at the next "
+                  "full search). Default 1: every frame")
+      ->check(CLI::Range(1, 1 << 30));
   cmd->add_flag("-q,--quiet", opt->quiet, "No progress and no summary (errors and warnings only)");
   cmd->add_flag("--strict", opt->strict,
                 "Exit with status 3 when the input is damaged (decoder errors, frames missing, timestamps out "
@@ -958,8 +965,9 @@ void add_annotate_command(CLI::App& app, int& status) {
       if (o.output.empty() && o.jsonl.empty()) throw std::invalid_argument("nothing to write: give --output, --jsonl or both");
       Family::parse_list(o.families);
       if (!o.overlay.empty()) overlay_flags(o.overlay);
-      if (!o.tracking && (o.smoothing || o.lost_after != Options().lost_after))
-        throw std::invalid_argument("--lost-after and --smoothing need --tracking");
+      if (!o.tracking && (o.smoothing || o.lost_after != Options().lost_after ||
+                          o.full_detection_interval != Options().full_detection_interval))
+        throw std::invalid_argument("--lost-after, --smoothing and --full-detection-interval need --tracking");
       if (!o.calibration.empty()) Camera::load(o.calibration);
       check_camera_options(o);
       // lftagdetect's ranges, narrower than the still-image tool's.
