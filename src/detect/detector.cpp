@@ -383,10 +383,11 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
       continue;
     }
     ++stats.expected_reads;
-    // The patch: the expected outline's box and a quarter of its side all round (the
-    // patch adds as much again), room for a prediction that is off by a few units.
+    // The patch: the expected outline's box and an eighth of its side all round (the
+    // patch adds a quarter of that again), room for a prediction a few units off; the
+    // patch's pixels are most of what this look costs.
     cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>(e.corners.begin(), e.corners.end()));
-    const int grow = std::max(box.width, box.height) / 4;
+    const int grow = std::max(box.width, box.height) / 8;
     box = cv::Rect(box.x - grow, box.y - grow, box.width + 2 * grow, box.height + 2 * grow);
     detail::SecondLook look;
     look.sought.reset().set(e.family.n());
