@@ -230,7 +230,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
 // The detection of an accepted outline reading: posed from the squares' centres under
 // the aligned outline, which is where the pose's perspective correction expects a blob's
 // centroid. None when no pose could be computed.
-std::optional<Detection> outline_detection(const detail::OutlineReading& reading, const Family& f, const Camera& camera,
+std::optional<Detection> pose_outline(const detail::OutlineReading& reading, const Family& f, const Camera& camera,
                                            const DetectorParams& p) {
   detail::Candidate c;
   c.family = f;
@@ -262,6 +262,21 @@ std::optional<Detection> outline_detection(const detail::OutlineReading& reading
   for (int i = 0; i < 4; ++i) det.keypoints[i] = observed[keypoint_cells[i]];
   if (!detail::estimate_pose(c, d, camera, p, det)) return std::nullopt;
   return det;
+}
+
+// An accepted outline reading of family `f` posed and added to `found`, unless no pose
+// could be computed or a detection stands at its place already (the verdict then says
+// which); its place is recorded in `read_places`.
+bool add_outline_detection(const detail::OutlineReading& reading, const Family& f, const Camera& camera,
+                           const DetectorParams& p, std::vector<Detection>& found, detail::ReadPlaces& read_places,
+                           OutlineVerdict* verdict) {
+  std::optional<Detection> det = pose_outline(reading, f, camera, p);
+  const Stage stage = !det ? Stage::pose : already_found(found, det->center) ? Stage::duplicate : Stage::detected;
+  if (verdict) verdict->stage = stage;
+  if (stage != Stage::detected) return false;
+  read_places.add(f.n(), reading.homography, f, reading.pixels_per_unit);
+  found.push_back(std::move(*det));
+  return true;
 }
 
 // One outline read from `outline` (the frame's bound of reads and its deadline allowing,
@@ -340,19 +355,8 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
       OutlineVerdict* verdict = trace ? &trace->outline_reads.emplace_back() : nullptr;
       const std::optional<detail::OutlineReading> reading = read_one_outline(
           work, outline, f, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict);
-      if (!reading) continue;
-      std::optional<Detection> det = outline_detection(*reading, f, camera, p);
-      if (!det) {
-        if (verdict) verdict->stage = Stage::pose;
-        continue;
-      }
-      if (already_found(found, det->center)) {
-        if (verdict) verdict->stage = Stage::duplicate;
-        continue;
-      }
+      if (!reading || !add_outline_detection(*reading, f, camera, p, found, read_places, verdict)) continue;
       ++stats.decoded, ++stats.second_look_found, ++stats.outline_found;
-      read_places.add(f.n(), reading->homography, f, reading->pixels_per_unit);
-      found.push_back(std::move(*det));
       return;  // one marker to a patch
     }
 }
@@ -416,18 +420,8 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
       if (verdict) verdict->stage = Stage::unexpected;
       continue;
     }
-    std::optional<Detection> det = outline_detection(*reading, e.family, camera, p);
-    if (!det) {
-      if (verdict) verdict->stage = Stage::pose;
-      continue;
-    }
-    if (already_found(found, det->center)) {
-      if (verdict) verdict->stage = Stage::duplicate;
-      continue;
-    }
+    if (!add_outline_detection(*reading, e.family, camera, p, found, read_places, verdict)) continue;
     ++stats.decoded, ++stats.expected_found, ++stats.outline_found;
-    read_places.add(e.family.n(), reading->homography, e.family, reading->pixels_per_unit);
-    found.push_back(std::move(*det));
   }
 }
 
