@@ -559,7 +559,8 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                            "messages then carry its track (track-id, track-state, track-age, first-seen, "
                            "last-seen), a marker missed in a frame stays in them as \"predicted\" (moved by "
                            "the track's constant-velocity model) until lost-after has passed, and an ambiguous "
-                           "pose takes the solution nearer the track's rotation. Switching it off ends every track",
+                           "pose takes the solution the track's evidence over its frames favours. Switching it off "
+                           "ends every track",
                            DEFAULT_PROP_TRACKING, playing));
   g_object_class_install_property(
       gobject_class, PROP_LOST_AFTER,

@@ -97,7 +97,7 @@
  *                      gdouble      the buffer timestamps (seconds) of the track's first
  *                                   frame and of the last one it was detected in
  *   pose-flipped       gboolean     an ambiguous pose was replaced by its other solution,
- *                                   the one nearer the track's rotation (rvec, tvec and
+ *                                   the one the track's evidence favours (rvec, tvec and
  *                                   alternative-* are then swapped)
  *   smoothed-rvec, smoothed-tvec
  *                      3 gdouble    the One Euro filter's pose (smoothing=TRUE only;

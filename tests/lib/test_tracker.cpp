@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: LGPL-2.1-or-later
 // The tracker: prediction of a marker missed in a frame, loss after the stated time,
-// crossing markers, the choice of an ambiguous pose by the track, and the One Euro
+// crossing markers, the choice of an ambiguous pose by the evidence the track has, and the One Euro
 // filter's lag on a step.
 #include <cmath>
 
@@ -206,7 +206,8 @@ TEST(Tracker, TimeGoingBackStartsOver) {
   EXPECT_EQ(tracker.size(), 0u);
 }
 
-// An ambiguous pose takes the solution nearer the track's rotation; a settled one stays.
+// After frames with one solution only (as sure as settled ones), an ambiguous pose takes
+// the solution on the track's chain; a settled one stays.
 TEST(Tracker, AmbiguousPoseFollowsTheTrack) {
   const cv::Vec3d tilted(0.4, 0, 0), flip(-0.4, 0, 0);
   for (double ratio : {1.2, 5.0}) {
@@ -237,6 +238,85 @@ TEST(Tracker, AmbiguousPoseFollowsTheTrack) {
       EXPECT_FALSE(out[0].track.flipped);
       EXPECT_NEAR(angle_deg(out[0].detection.rvec, flip), 0, 1e-9);
     }
+  }
+}
+
+namespace {
+
+// A detection of marker 9 whose best solution is `best` (reprojection error 0.1 px) and
+// whose other is `other`, `ratio` times worse.
+Detection ambiguous(const cv::Vec3d& best, const cv::Vec3d& other, double ratio) {
+  Detection d = square(TagId(9), {100, 100});
+  d.rvec = best;
+  d.alternative_rvec = other;
+  d.tvec = {0.1, 0.1, 1.0};
+  d.alternative_tvec = {0.1, 0.1, 1.01};
+  d.reprojection_error = 0.10;
+  d.alternative_reprojection_error = 0.10 * ratio;
+  d.ambiguity_ratio = ratio;
+  return d;
+}
+
+// A marker turning about its x axis, tilted 0.3 rad and 0.02 rad more each frame, and its
+// flip (tilted the other way), the planar pose's other solution.
+cv::Vec3d turning(int f) { return {0.3 + 0.02 * f, 0, 0}; }
+cv::Vec3d turning_flip(int f) { return {-(0.3 + 0.02 * f), 0, 0}; }
+
+}  // namespace
+
+// The first frames' per-frame choice is the flip; later frames that fit the true pose
+// better (settled, or only ambiguous but clearly better) outweigh them, and the track
+// then stays on the true pose through frames that again favour the flip a little.
+TEST(Tracker, EvidenceOvercomesAnEarlyFlip) {
+  for (double later : {2.5, 5.0}) {
+    Tracker tracker;
+    int f = 0;
+    for (; f < 4; ++f) {  // the flip fits 1.2 times better
+      const auto out = tracker.update(f * kFrame, {ambiguous(turning_flip(f), turning(f), 1.2)});
+      ASSERT_EQ(out.size(), 1u);
+    }
+    for (; f < 8; ++f) {  // the truth fits `later` times better
+      const auto out = tracker.update(f * kFrame, {ambiguous(turning(f), turning_flip(f), later)});
+      ASSERT_EQ(out.size(), 1u);
+      if (f >= 5) {  // the first such frame may not yet outweigh the four before
+        EXPECT_NEAR(angle_deg(out[0].detection.rvec, turning(f)), 0, 1e-9) << "later " << later << " frame " << f;
+        EXPECT_FALSE(out[0].track.flipped);
+      }
+    }
+    for (; f < 11; ++f) {  // the flip fits 1.2 times better again
+      const auto out = tracker.update(f * kFrame, {ambiguous(turning_flip(f), turning(f), 1.2)});
+      ASSERT_EQ(out.size(), 1u);
+      EXPECT_NEAR(angle_deg(out[0].detection.rvec, turning(f)), 0, 1e-9) << "later " << later << " frame " << f;
+      EXPECT_NEAR(angle_deg(out[0].detection.alternative_rvec, turning_flip(f)), 0, 1e-9);
+      EXPECT_TRUE(out[0].track.flipped);
+      EXPECT_NEAR(out[0].detection.ambiguity_ratio, 1 / 1.2, 1e-12);
+    }
+  }
+}
+
+// After a settled start, a run of ambiguous frames whose per-frame choice is the flip in
+// every third frame (and a frame with no alternative, and a missed frame, among them):
+// the track reports the true pose in every frame, flipping exactly the frames whose
+// detector chose the flip.
+TEST(Tracker, StaysOnTheTruePoseThroughAmbiguousFrames) {
+  Tracker tracker;
+  for (int f = 0; f < 30; ++f) {
+    std::vector<Detection> found;
+    if (f < 3) {
+      found.push_back(ambiguous(turning(f), turning_flip(f), 5.0));
+    } else if (f == 12) {
+      Detection d = ambiguous(turning(f), turning_flip(f), 0);
+      d.alternative_reprojection_error = 0;
+      found.push_back(d);
+    } else if (f != 20) {
+      const bool flip = f % 3 == 0;
+      found.push_back(flip ? ambiguous(turning_flip(f), turning(f), 1.2) : ambiguous(turning(f), turning_flip(f), 1.4));
+    }
+    const auto out = tracker.update(f * kFrame, found);
+    ASSERT_EQ(out.size(), 1u);
+    EXPECT_EQ(out[0].track.state, f == 20 ? TrackState::predicted : TrackState::measured);
+    EXPECT_NEAR(angle_deg(out[0].detection.rvec, turning(f)), 0, f == 20 ? 1e-6 : 1e-9) << "frame " << f;
+    EXPECT_EQ(out[0].track.flipped, f >= 3 && f != 12 && f != 20 && f % 3 == 0) << "frame " << f;
   }
 }
 

@@ -36,8 +36,13 @@ struct TrackerParams {
   // unseen it is lost, reported once, and dropped. 0: lost in the first frame it is
   // missed (never predicted).
   double lost_after = 0.5;
-  // A detection whose pose is ambiguous (Detection::ambiguity_ratio under this) takes
-  // whichever of its two solutions is nearer the track's predicted rotation. 0: never.
+  // A detection whose pose is ambiguous (Detection::ambiguity_ratio under this) takes the
+  // solution the track's accumulated evidence favours: the track follows both solutions
+  // of the planar pose from frame to frame (two chains, each frame's two solutions going
+  // to the chains whose predicted rotations they are nearer), sums for each chain the log
+  // of the reprojection errors of the solutions it was given, and reports the chain with
+  // the smaller sum. A detection at or above this ratio keeps the detector's choice and
+  // puts its chain in the lead. 0: the detector's choice always stands.
   double max_ambiguity_ratio = 3.0;
   // The One Euro filter on the published pose (TrackInfo::smoothed_rvec/tvec); off by
   // default. The filter's cutoff frequency is min_cutoff + beta * speed, in hertz, where
@@ -86,8 +91,9 @@ struct TrackInfo {
   double time = 0;          // seconds: this frame
   double age() const { return time - first_seen; }
   double unseen() const { return time - last_seen; }
-  // The detector's pose was replaced by its other solution, the one nearer the track's
-  // predicted rotation (the detection's rvec/tvec and alternative_* are then swapped).
+  // The detector's pose was replaced by its other solution, the one on the track's
+  // favoured chain (see TrackerParams::max_ambiguity_ratio; the detection's rvec/tvec and
+  // alternative_* are then swapped).
   bool flipped = false;
   // The One Euro filter's pose (with TrackerParams::smoothing); the raw one stays in the
   // Detection.
@@ -135,6 +141,10 @@ class Tracker {
     std::array<cv::Point2d, 4> corners;
     cv::Vec3d rvec, tvec;
   };
+  struct ChainPose {
+    double time;
+    cv::Vec3d rvec, tvec;
+  };
   struct Track {
     TrackInfo info;
     Detection last;               // the last detection
@@ -142,11 +152,18 @@ class Tracker {
     OneEuroFilter<3> translation;
     OneEuroFilter<4> rotation;    // a unit quaternion, kept on one hemisphere
     cv::Vec4d last_quaternion;
+    // The planar pose's two solutions followed from frame to frame (the last poses of
+    // each, newest last; the second is empty until a detection had an alternative), the
+    // evidence for the first over the second (sum of log reprojection error ratios), and
+    // the chain reported.
+    std::array<std::deque<ChainPose>, 2> chains;
+    double evidence = 0;
+    int reported = 0;
   };
   Track new_track(const Detection& d, double time);
   TrackedMarker predicted(const Track& track, double time) const;
   void smooth(Track& track, TrackedMarker& out);
-  void choose_pose(const Track& track, Detection& d, double time, bool& flipped) const;
+  void choose_pose(Track& track, Detection& d, double time, bool& flipped) const;
 
   TrackerParams params_;
   std::vector<Track> tracks_;
