@@ -193,10 +193,10 @@ TEST(Scene, DegenerateCamerasNeverDrawOutsideTheMarker) {
   const SceneRenderer renderer(p);
   const cv::Mat1b image = renderer.render({to_target(m)});
   ASSERT_EQ(image.size(), cv::Size(64, 48));
-  // The marker projects to far less than a pixel: everything but the principal point's
-  // pixels is the empty scene's.
+  // The marker projects to far less than a pixel (about 1e-4 px across): it covers no
+  // pixel by more than a grey level, so the image is the empty scene's. A sample counted
+  // although its grid point lies outside the albedo would count as covered and draw its
+  // pixel in the marker's grey instead.
   const cv::Mat1b empty = renderer.render({});
-  cv::Mat1b differs;
-  cv::compare(image, empty, differs, cv::CMP_NE);
-  EXPECT_LE(cv::countNonZero(differs), 4);
+  EXPECT_LE(cv::norm(image, empty, cv::NORM_INF), 1.0);
 }
