@@ -66,8 +66,8 @@ double perspective_free_ink_ratio(std::vector<Blob>& blobs) {
 
 }  // namespace
 
-Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary, int reach,
-                  double white) {
+Blob BlobMeasurer::measure(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary,
+                           int reach, double white) {
   // The blob's window: its box grown by `reach`. In it, each pixel is the blob's own,
   // another black region's, or white; a white pixel counts for the blob when the nearest
   // black pixel within `reach` is the blob's (ties count half). So the anti-aliased edge
@@ -80,7 +80,7 @@ Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, co
   const int cx1 = std::min(image.width - 1, x1 + reach), cy1 = std::min(image.height - 1, y1 + reach);
   const int w = cx1 - cx0 + 1, h = cy1 - cy0 + 1;
   enum : std::uint8_t { kWhite = 0, kOwn = 1, kOther = 2 };
-  thread_local std::vector<std::uint8_t> cls;
+  std::vector<std::uint8_t>& cls = classes_;
   cls.assign(std::size_t(w) * h, kWhite);
   for (int y = cy0; y <= cy1; ++y)
     for (int x = cx0; x <= cx1; ++x)
@@ -88,7 +88,7 @@ Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, co
   // The blob with everything it encloses: a marker's square has no holes, but one wider
   // than the threshold window binarises as a ring around a white hole, whose dark pixels
   // are as much the square's ink as the ring's.
-  thread_local std::vector<int> inside;
+  std::vector<int>& inside = inside_;
   inside.assign(1, region);
   for (std::size_t i = 0; i < inside.size(); ++i) {
     const int* child = tree.children_of(inside[i]);
@@ -104,7 +104,8 @@ Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, co
   // row's horizontal distance to the nearest pixel of each class (capped at reach + 1)
   // makes that search 2 reach + 1 lookups a pixel instead of (2 reach + 1)^2.
   const int limit = reach * reach, cap = std::min(reach + 1, 255);
-  thread_local std::vector<std::uint8_t> to_own, to_other;
+  std::vector<std::uint8_t>& to_own = to_own_;
+  std::vector<std::uint8_t>& to_other = to_other_;
   to_own.resize(cls.size()), to_other.resize(cls.size());
   for (int y = 0; y < h; ++y) {
     const std::uint8_t* c = cls.data() + std::size_t(y) * w;
@@ -199,9 +200,8 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
   }
 
   // Topology: white regions with n^2 .. n^2 + extra children once the noise is left out.
-  thread_local std::vector<int> kids;
-  thread_local std::vector<Topological> found;
-  kids.clear(), found.clear();
+  std::vector<int> kids;
+  std::vector<Topological> found;
   for (int r = 1; r < int(tree.regions.size()); ++r) {
     const Region& white = tree.regions[r];
     if (white.black || white.child_count < smallest) continue;
@@ -252,6 +252,7 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
       }
   }
 
+  BlobMeasurer measurer;
   for (std::size_t i = 0; i < examined; ++i) {
     const Topological& t = found[i];
     const Family& f = params.families[t.family];
@@ -267,7 +268,7 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
     c.white_level =
         params.centroid_reference == CentroidReference::local_white ? white_level(tree, t.region, image) : 255.0;
     for (int j = 0; j < n2; ++j) {
-      Blob b = measure_blob(tree, k[j], image, binary, params.dilation * patch.scale, c.white_level);
+      Blob b = measurer.measure(tree, k[j], image, binary, params.dilation * patch.scale, c.white_level);
       b.centroid = patch.to_frame(b.centroid);
       b.mass *= pixel_area;
       c.blobs.push_back(b);

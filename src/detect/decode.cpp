@@ -156,16 +156,15 @@ std::vector<cv::Point2d> square(double a, double b) {
 // For 2x2, where the four blobs fix the homography and leave no residual: the grey levels
 // where reading `id` under h must be black (the square centres and the middle of the
 // border) and white (the middle of the white ring inside the border and the middle of the
-// cross between the squares). Filled into reused buffers: this runs for every hypothesis.
+// cross between the squares).
 struct Photometry {
   std::vector<cv::Point2d> black_units, white_units, pixels;
   std::vector<double> black, white;
 };
-Photometry& photometry(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
-                       const Camera& camera) {
-  thread_local Photometry m;
+Photometry photometry(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
+                      const Camera& camera) {
+  Photometry m;
   const double s = f.side();
-  m.black_units.clear(), m.white_units.clear();
   for (int g = 0; g < f.cell_count(); ++g) m.black_units.push_back(f.center(g, f.is_baseline(g) ? 0 : id.digit(f.data_index(g))));
   for (int i = 0; i < 8; ++i) {
     const double t = 1 + (s - 2) * (i + 0.5) / 8;  // along the border's middle line
@@ -192,7 +191,7 @@ Photometry& photometry(const Family& f, TagId id, const cv::Matx33d& h, const Im
 // the wrong order.
 double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
                         const Camera& camera) {
-  Photometry& m = photometry(f, id, h, image, camera);
+  Photometry m = photometry(f, id, h, image, camera);
   // For each white sample, the black samples at least as bright (sorted: n log n, where
   // every pair was n^2).
   std::sort(m.black.begin(), m.black.end());
@@ -205,7 +204,7 @@ double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const I
 // misordered pairs are none).
 bool no_misordered_pair(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
                         const Camera& camera) {
-  const Photometry& m = photometry(f, id, h, image, camera);
+  const Photometry m = photometry(f, id, h, image, camera);
   return *std::min_element(m.white.begin(), m.white.end()) > *std::max_element(m.black.begin(), m.black.end());
 }
 
@@ -310,8 +309,7 @@ bool assign_cells(const Candidate& c, const BlobsByX& by_x, const KeyPoints& k, 
                   Decoding& d) {
   const Family& f = c.family;
   const std::array<int, 4> kc = f.keypoint_cells();
-  thread_local std::vector<char> used;
-  used.assign(c.blobs.size(), 0);
+  std::vector<char> used(c.blobs.size(), 0);
   d.blob_of_cell.assign(f.cell_count(), -1);
   d.blob_of_cell[kc[0]] = k.blob[0], d.blob_of_cell[kc[1]] = k.blob[1];
   used[k.blob[0]] = used[k.blob[1]] = 1;
@@ -451,9 +449,8 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     double residual = 0;
     bool resolved = false, placed = false, passes = false;  // resolution; and cell residual; and ink
   };
-  thread_local std::vector<Reading> readings;
-  thread_local CellCentres projected;
-  readings.clear();
+  std::vector<Reading> readings;
+  CellCentres projected;
   // Hypotheses that read the same id from the same blobs refit the same homography: the
   // refit and what follows from it are taken from the first of them.
   struct Refit {

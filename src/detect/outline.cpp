@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <mutex>
 
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
@@ -253,11 +254,27 @@ cv::Mat1f blurred_template(const cv::Mat1f& sharp, const cv::Matx22d& covariance
   return out;
 }
 
-// The sharp structure of `family`, drawn once per thread.
+// One value per family size, each made on its first use, once for the process, and read
+// only after that: every detector and thread shares these templates, so nothing may write
+// into their pixels (they are handed out as const).
+template <class T>
+class PerFamilySize {
+ public:
+  template <class Make>
+  const T& get(const Family& family, Make make) {
+    std::call_once(made_[family.n()], [&] { values_[family.n()] = make(); });
+    return values_[family.n()];
+  }
+
+ private:
+  std::array<std::once_flag, Family::kMaxN + 1> made_;
+  std::array<T, Family::kMaxN + 1> values_;
+};
+
+// The sharp structure of `family`.
 const cv::Mat1f& sharp_structure(const Family& family) {
-  thread_local std::array<cv::Mat1f, Family::kMaxN + 1> sharp;
-  if (sharp[family.n()].empty()) sharp[family.n()] = structure_template(family);
-  return sharp[family.n()];
+  static PerFamilySize<cv::Mat1f> sharp;
+  return sharp.get(family, [&] { return structure_template(family); });
 }
 
 // The blur, in template pixels, of a structure seen at `per_unit` pixels per unit.
@@ -269,7 +286,9 @@ struct BlurredStructure {
   SparseTemplate sparse;
 };
 
-BlurredStructure blurred_structure(const Family& family, double per_unit) {
+// Drawn into `drawn`, or taken from the shared table (see below).
+const BlurredStructure& blurred_structure(const Family& family, double per_unit,
+                                          std::optional<BlurredStructure>& drawn) {
   const double sigma = template_blur(per_unit);
   const auto draw = [&] {
     cv::Mat1f image = sharp_structure(family).clone();
@@ -277,14 +296,14 @@ BlurredStructure blurred_structure(const Family& family, double per_unit) {
     return BlurredStructure{image, SparseTemplate(image, 3)};
   };
   // Every crop of kTemplateScale pixels per unit or more is read with the same blur, the
-  // one of the template's own resolution: drawn once per thread (most outline reads of a
-  // frame crowded with other markers are of that kind; drawing it each time cost 2 % of
-  // such a frame's instructions).
-  if (per_unit < kTemplateScale) return draw();
-  thread_local std::array<std::optional<BlurredStructure>, Family::kMaxN + 1> resolved;
-  std::optional<BlurredStructure>& cached = resolved[family.n()];
-  if (!cached) cached = draw();
-  return *cached;
+  // one of the template's own resolution: drawn once (most outline reads of a frame
+  // crowded with other markers are of that kind; drawing it each time cost 2 % of such a
+  // frame's instructions).
+  if (per_unit >= kTemplateScale) {
+    static PerFamilySize<std::optional<BlurredStructure>> resolved;
+    return *resolved.get(family, draw);
+  }
+  return drawn.emplace(draw());
 }
 
 // Where a reading takes its white and black: the middle of the white ring (its four
@@ -1042,8 +1061,10 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
 
   // The template: the structure blurred to the crop's resolution (read only from here on).
   double sigma = template_blur(per_unit);
-  const BlurredStructure structure = blurred_structure(family, per_unit);
-  cv::Mat1f templ = structure.image;
+  std::optional<BlurredStructure> drawn;
+  const BlurredStructure& structure = blurred_structure(family, per_unit, drawn);
+  cv::Mat1f defocused;  // a defocused template that replaces it, see try_defocus
+  const cv::Mat1f* templ = &structure.image;  // const: its pixels may be the shared table's
   const SparseTemplate& sparse = structure.sparse;
   const cv::Matx33d to_template = unit_to_template();
   const cv::Matx33d from_frame = to_frame.inv();
@@ -1127,18 +1148,19 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   if (start_correlation < min_start) {
     // The structure smeared in eight directions over the lengths sought after the
     // alignment, blurred as at two to three pixels per unit (the bounds above were
-    // measured with them): drawn once per thread.
-    thread_local std::array<std::vector<SparseTemplate>, Family::kMaxN + 1> smeared_structures;
-    std::vector<SparseTemplate>& smeared = smeared_structures[family.n()];
-    if (smeared.empty()) {
+    // measured with them): drawn once.
+    static PerFamilySize<std::vector<SparseTemplate>> smeared_structures;
+    const std::vector<SparseTemplate>& smeared = smeared_structures.get(family, [&] {
+      std::vector<SparseTemplate> drawn;
       const cv::Mat1f blurred = blurred_template(sharp_structure(family), 0.5);
       std::vector<double> lengths;  // template pixels
       for (double units = 1.5; units <= kMaxSmear + 1; units += 1.5) lengths.push_back(units * kTemplateScale);
       for (int a = 0; a < 8; ++a)
         for (SparseTemplate& t :
              SparseTemplate::smeared(blurred, 3, {std::cos(a * CV_PI / 8), std::sin(a * CV_PI / 8)}, lengths))
-          smeared.push_back(std::move(t));
-    }
+          drawn.push_back(std::move(t));
+      return drawn;
+    });
     const cv::Mat warp = warp_of(start);
     double best = start_correlation;
     for (std::size_t i = 0; i < smeared.size() && best < min_start && !deadline.passed(); ++i)
@@ -1164,7 +1186,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 25, 1e-4);
   double correlation = 0;
   try {
-    correlation = cv::findTransformECC(templ, crop, warp, cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
+    correlation = cv::findTransformECC(*templ, crop, warp, cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
   } catch (const cv::Exception&) {
     return std::nullopt;  // did not converge: not a marker's structure
   }
@@ -1175,7 +1197,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // The linear part of `warp_to_crop` (template pixels -> crop pixels) at the template's centre.
   const auto jacobian_at_centre = [&](const cv::Mat& warp_to_crop) {
     const cv::Matx33f wf = warp_to_crop;
-    const float cx = templ.cols / 2.0f, cy = templ.rows / 2.0f;
+    const float cx = templ->cols / 2.0f, cy = templ->rows / 2.0f;
     const float z = wf(2, 0) * cx + wf(2, 1) * cy + wf(2, 2);
     const float mx = (wf(0, 0) * cx + wf(0, 1) * cy + wf(0, 2)) / z, my = (wf(1, 0) * cx + wf(1, 1) * cy + wf(1, 2)) / z;
     return cv::Matx22d((wf(0, 0) - mx * wf(2, 0)) / z, (wf(0, 1) - mx * wf(2, 1)) / z, (wf(1, 0) - my * wf(2, 0)) / z,
@@ -1238,8 +1260,9 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       const double c =
           cv::findTransformECC(best_template, crop, again, cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
       if (c <= correlation) return true;  // the sharper alignment stands, and no smear beats it
-      contrast_scale = structure_contrast(templ) / structure_contrast(best_template);
-      correlation = c, warp = again, templ = best_template, sigma = best_sigma, defocus = best_units;
+      contrast_scale = structure_contrast(*templ) / structure_contrast(best_template);
+      defocused = best_template;
+      correlation = c, warp = again, templ = &defocused, sigma = best_sigma, defocus = best_units;
       uneven = best_uneven;
     } catch (const cv::Exception&) {
       // the sharper alignment stands
@@ -1257,7 +1280,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       const cv::Point2d along = cv::Point2d(std::cos(angle), std::sin(angle)) * units * crop_per_unit;
       const cv::Point2d in_template = template_smear(warp, along);
       if (in_template == cv::Point2d()) return;
-      if (const double c = SparseTemplate(templ, 3, in_template).correlation(crop, warp); c > best)
+      if (const double c = SparseTemplate(*templ, 3, in_template).correlation(crop, warp); c > best)
         best = c, best_along = along;
     };
     for (int a = 0; a < 8; ++a)
@@ -1271,7 +1294,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     if (!try_defocus(best) && best_along != cv::Point2d() && !deadline.passed()) {
       cv::Mat again = warp.clone();
       try {
-        const double c = cv::findTransformECC(smeared(templ, template_kernel(warp, best_along)), crop, again,
+        const double c = cv::findTransformECC(smeared(*templ, template_kernel(warp, best_along)), crop, again,
                                               cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
         if (c > correlation) {
           correlation = c, warp = again, smear_crop = best_along;

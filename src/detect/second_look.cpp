@@ -59,8 +59,8 @@ std::vector<cv::Point> region_hull(const RegionTree& tree, const std::vector<int
   if (regions.empty()) return {};
   int y0 = tree.regions[regions[0]].y0, y1 = tree.regions[regions[0]].y1;
   for (const int r : regions) y0 = std::min(y0, tree.regions[r].y0), y1 = std::max(y1, tree.regions[r].y1);
-  thread_local std::vector<std::pair<int, int>> rows;  // first and last pixel of each row
-  rows.assign(y1 - y0 + 1, {std::numeric_limits<int>::max(), std::numeric_limits<int>::min()});
+  std::vector<std::pair<int, int>> rows(  // first and last pixel of each row
+      y1 - y0 + 1, {std::numeric_limits<int>::max(), std::numeric_limits<int>::min()});
   for (const int r : regions)
     tree.for_each_run(r, [&](int y, int x0, int x1) {
       auto& [first, last] = rows[y - y0];

@@ -9,7 +9,7 @@
 //   topological CCA           -                                 RegionLabeller::label (regions.cpp)
 //   n^2 children, noise       min_child_fraction,               find_candidates (candidates.cpp)
 //                             max_child_ratio, max_extra_children
-//   delta, vertex estimation  dilation, centroid_reference      measure_blob (candidates.cpp)
+//   delta, vertex estimation  dilation, centroid_reference      BlobMeasurer (candidates.cpp)
 //   tau1, area constraint     max_ink_ratio                     perspective_free_ink_ratio (candidates.cpp)
 //   K0, K1 (baseline), K2, K3 -                                 hull_corners, find_keypoints (keypoints.cpp)
 //   geometry, angle           -                                 find_keypoints (keypoints.cpp)
@@ -225,11 +225,19 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
                      std::vector<Candidate>* area_rejected = nullptr, int* budget = nullptr,
                      std::vector<Candidate>* skipped = nullptr);
 
-// Centroid of the inverted grey image over `region` with its holes and the white pixels
-// within `reach` pixels of it that are nearer to it than to any other black pixel. `white` is the grey
-// level that weighs zero (255 for the paper's plain inversion).
-Blob measure_blob(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary, int reach,
-                  double white);
+// Centroids of blobs, its buffers reused from one blob to the next.
+class BlobMeasurer {
+ public:
+  // Centroid of the inverted grey image over `region` with its holes and the white pixels
+  // within `reach` pixels of it that are nearer to it than to any other black pixel.
+  // `white` is the grey level that weighs zero (255 for the paper's plain inversion).
+  Blob measure(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary, int reach,
+               double white);
+
+ private:
+  std::vector<std::uint8_t> classes_, to_own_, to_other_;  // per pixel of the blob's window
+  std::vector<int> inside_;                                 // the region and what it encloses
+};
 
 // ---------------------------------------------------------------- second_look.cpp
 struct SecondLook {

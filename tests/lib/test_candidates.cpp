@@ -78,7 +78,7 @@ struct Probe {
   double share;
 };
 
-// measure_blob's expected output from first principles: every pixel of the region with
+// BlobMeasurer::measure's expected output from first principles: every pixel of the region with
 // weight white - grey, plus the probes with their share.
 void expect_blob(const Analysed& a, int region, int reach, double white, const std::vector<Probe>& probes,
                  const std::string& what) {
@@ -93,7 +93,7 @@ void expect_blob(const Analysed& a, int region, int reach, double white, const s
     const double w = p.share * std::max(0.0, white - p.grey);
     m += w, mx += w * p.x, my += w * p.y;
   }
-  const Blob b = detail::measure_blob(a.tree, region, a.view(), a.binary, reach, white);
+  const Blob b = detail::BlobMeasurer().measure(a.tree, region, a.view(), a.binary, reach, white);
   EXPECT_EQ(b.region, region) << what;
   EXPECT_EQ(b.area, a.tree.regions[region].area) << what;
   EXPECT_NEAR(b.mass, m, 1e-9) << what;
@@ -144,7 +144,7 @@ std::set<int> regions_of(const Candidate& c) {
 
 }  // namespace
 
-// ---------------------------------------------------------------------------- measure_blob
+// ---------------------------------------------------------------------------- BlobMeasurer
 
 TEST(MeasureBlob, ExactOnAPixelAlignedMarker) {
   // 5 pixels per unit: every edge on a pixel boundary, pixels 0 or 255. With white = 255
@@ -159,7 +159,7 @@ TEST(MeasureBlob, ExactOnAPixelAlignedMarker) {
     const int r = a.at(centre);
     ASSERT_GE(r, 0);
     ASSERT_TRUE(a.tree.regions[r].black);
-    const Blob b = detail::measure_blob(a.tree, r, a.view(), a.binary, 1, 255.0);
+    const Blob b = detail::BlobMeasurer().measure(a.tree, r, a.view(), a.binary, 1, 255.0);
     EXPECT_EQ(b.area, int(squares[g].width * squares[g].height * ppu * ppu)) << "cell " << g;
     EXPECT_DOUBLE_EQ(b.mass, 255.0 * b.area) << "cell " << g;
     EXPECT_NEAR(b.centroid.x, centre.x, 1e-9) << "cell " << g;
@@ -180,7 +180,7 @@ TEST(MeasureBlob, CentroidsOfRasterisedMarkersAreTheSquareCentres) {
       const int r = a.at(truth);
       ASSERT_GE(r, 0);
       ASSERT_TRUE(a.tree.regions[r].black) << f.name() << " cell " << g;
-      const Blob b = detail::measure_blob(a.tree, r, a.view(), a.binary, 1, 255.0);
+      const Blob b = detail::BlobMeasurer().measure(a.tree, r, a.view(), a.binary, 1, 255.0);
       EXPECT_LT(cv::norm(b.centroid - truth), 0.02) << f.name() << " at " << ppu << " px/u, cell " << g << ": "
                                                     << b.centroid << " vs " << truth;
       // The mass is the square's ink: area in pixels x 255.
@@ -213,7 +213,7 @@ TEST(MeasureBlob, CentroidsOfATiltedSceneAreTheProjectedSquareCentroids) {
   for (int g = 0; g < m.family.cell_count(); ++g) {
     const int r = a.at(t.centers[g]);
     ASSERT_TRUE(r >= 0 && a.tree.regions[r].black);
-    const Blob b = detail::measure_blob(a.tree, r, a.view(), a.binary, 1, white);
+    const Blob b = detail::BlobMeasurer().measure(a.tree, r, a.view(), a.binary, 1, white);
     EXPECT_LT(cv::norm(b.centroid - t.centroids[g]), 0.02) << "cell " << g << ": " << b.centroid << " vs "
                                                            << t.centroids[g];
   }
@@ -311,7 +311,7 @@ TEST(MeasureBlob, WhiteLevelIsTheZeroWeight) {
   // A blob with no ink at all keeps the middle of its box as its centroid.
   const cv::Mat1b flat(grey.size(), uchar(250));
   const Analysed f = analyse(flat, black);
-  const Blob b = detail::measure_blob(f.tree, f.at(1, 1), f.view(), f.binary, 1, 200.0);
+  const Blob b = detail::BlobMeasurer().measure(f.tree, f.at(1, 1), f.view(), f.binary, 1, 200.0);
   EXPECT_EQ(b.mass, 0.0);
   EXPECT_EQ(b.centroid, cv::Point2d(1.5, 1.5));
 }
@@ -335,7 +335,7 @@ TEST(FindCandidates, AMarkerIsOneCandidate) {
   for (int g = 0; g < 9; ++g) expected.insert(a.at(raster_pixel(f.centers(id)[g], ppu, margin)));
   EXPECT_EQ(regions_of(c), expected);
   for (const Blob& b : c.blobs) {
-    const Blob direct = detail::measure_blob(a.tree, b.region, a.view(), a.binary, 1, c.white_level);
+    const Blob direct = detail::BlobMeasurer().measure(a.tree, b.region, a.view(), a.binary, 1, c.white_level);
     EXPECT_EQ(b.mass, direct.mass);
     EXPECT_EQ(b.centroid, direct.centroid);
     EXPECT_EQ(b.point, b.centroid);  // no distortion
@@ -405,7 +405,7 @@ TEST(FindCandidates, LocalWhiteIsTheUpperQuartileOfTheWhiteRegion) {
   ASSERT_EQ(out.size(), 1u);
   EXPECT_EQ(out[0].white_level, expected);
   for (const Blob& b : out[0].blobs) {
-    const Blob direct = detail::measure_blob(a.tree, b.region, a.view(), a.binary, 1, expected);
+    const Blob direct = detail::BlobMeasurer().measure(a.tree, b.region, a.view(), a.binary, 1, expected);
     EXPECT_EQ(b.mass, direct.mass);
   }
 }

@@ -107,7 +107,7 @@ struct DetectorParams {
 
   // -- Vertex estimation: centroids of the inverted grey image over each black region
   //    and the white pixels within `dilation` pixels of it (a Euclidean radius, where the
-  //    paper dilates by an L-infinity square; see measure_blob).
+  //    paper dilates by an L-infinity square; see BlobMeasurer).
   int dilation = 1;  // delta (paper: 1)
   CentroidReference centroid_reference = CentroidReference::local_white;
 
