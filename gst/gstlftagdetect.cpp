@@ -137,13 +137,12 @@ enum {
   PROP_CY,
   PROP_DISTORTION,
   PROP_OVERLAY,
-  PROP_MESSAGE,
   PROP_MESSAGES,
   PROP_MESSAGE_DETECTIONS,
   PROP_THRESHOLD_WINDOW,
   PROP_THRESHOLD_OFFSET,
   PROP_SECOND_LOOK,
-  PROP_MAX_AREA_RATIO,
+  PROP_MAX_INK_RATIO,
   PROP_MIN_SPREAD_RATIO,
   PROP_MAX_DECODE_ERROR,
   PROP_MAX_CELL_RESIDUAL,
@@ -478,12 +477,6 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                            "a message holds the timestamps, ids, centres, appeared, vanished and frame size only",
                            DEFAULT_PROP_MESSAGE_DETECTIONS, playing));
   g_object_class_install_property(
-      gobject_class, PROP_MESSAGE,
-      g_param_spec_boolean("message", "Message",
-                           "Deprecated: use messages. TRUE: messages=with-markers (unless messages "
-                           "already posts), FALSE: messages=none; reads TRUE unless messages=none",
-                           TRUE, GParamFlags(playing | G_PARAM_DEPRECATED)));
-  g_object_class_install_property(
       gobject_class, PROP_THRESHOLD_WINDOW,
       g_param_spec_int("threshold-window", "Threshold window",
                        "Side in pixels of the window whose mean grey level a pixel must be below "
@@ -501,11 +494,11 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                            "clusters where no marker was found: far, small and motion-blurred markers",
                            defaults.second_look, playing));
   g_object_class_install_property(
-      gobject_class, PROP_MAX_AREA_RATIO,
-      g_param_spec_double("max-area-ratio", "Maximum area ratio",
-                          "tau1: a candidate is rejected when its largest black square is larger "
-                          "than this many times its smallest, once perspective is taken out (the "
-                          "design ratio is 1.78)",
+      gobject_class, PROP_MAX_INK_RATIO,
+      g_param_spec_double("max-ink-ratio", "Maximum ink ratio",
+                          "tau1: a candidate is rejected when its largest black square holds more "
+                          "than this many times the ink of its smallest, once perspective is taken "
+                          "out (the design ratio is 1.78)",
                           1.0, 100.0, defaults.max_ink_ratio, playing));
   g_object_class_install_property(
       gobject_class, PROP_MIN_SPREAD_RATIO,
@@ -729,19 +722,13 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
       s.detector.distortion = std::move(distortion);
       break;
     case PROP_OVERLAY: s.overlay = g_value_get_flags(value); break;
-    case PROP_MESSAGE:
-      if (!g_value_get_boolean(value))
-        s.messages = GST_LFTAG_DETECT_MESSAGES_NONE;
-      else if (s.messages == GST_LFTAG_DETECT_MESSAGES_NONE)
-        s.messages = GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS;
-      break;
     case PROP_MESSAGES: s.messages = GstLFTagDetectMessages(g_value_get_enum(value)); break;
     case PROP_MESSAGE_DETECTIONS: s.message_detections = g_value_get_boolean(value); break;
     case PROP_LATE_FRAMES: s.late_frames = GstLFTagDetectLateFrames(g_value_get_enum(value)); break;
     case PROP_THRESHOLD_WINDOW: s.detector.threshold_window = g_value_get_int(value); break;
     case PROP_THRESHOLD_OFFSET: s.detector.threshold_offset = g_value_get_int(value); break;
     case PROP_SECOND_LOOK: s.detector.second_look = g_value_get_boolean(value); break;
-    case PROP_MAX_AREA_RATIO: s.detector.max_ink_ratio = g_value_get_double(value); break;
+    case PROP_MAX_INK_RATIO: s.detector.max_ink_ratio = g_value_get_double(value); break;
     case PROP_MIN_SPREAD_RATIO: s.detector.min_spread_ratio = g_value_get_double(value); break;
     case PROP_MAX_DECODE_ERROR: s.detector.max_decode_error = g_value_get_double(value); break;
     case PROP_MAX_CELL_RESIDUAL: s.detector.max_cell_residual = g_value_get_double(value); break;
@@ -774,14 +761,13 @@ static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue
     case PROP_CY: g_value_set_double(value, lftag::gst::principal_to_property(s.detector.cy)); break;
     case PROP_DISTORTION: g_value_set_string(value, optional_string(s.distortion_text)); break;
     case PROP_OVERLAY: g_value_set_flags(value, s.overlay); break;
-    case PROP_MESSAGE: g_value_set_boolean(value, s.messages != GST_LFTAG_DETECT_MESSAGES_NONE); break;
     case PROP_MESSAGES: g_value_set_enum(value, s.messages); break;
     case PROP_MESSAGE_DETECTIONS: g_value_set_boolean(value, s.message_detections); break;
     case PROP_LATE_FRAMES: g_value_set_enum(value, s.late_frames); break;
     case PROP_THRESHOLD_WINDOW: g_value_set_int(value, s.detector.threshold_window); break;
     case PROP_THRESHOLD_OFFSET: g_value_set_int(value, s.detector.threshold_offset); break;
     case PROP_SECOND_LOOK: g_value_set_boolean(value, s.detector.second_look); break;
-    case PROP_MAX_AREA_RATIO: g_value_set_double(value, s.detector.max_ink_ratio); break;
+    case PROP_MAX_INK_RATIO: g_value_set_double(value, s.detector.max_ink_ratio); break;
     case PROP_MIN_SPREAD_RATIO: g_value_set_double(value, s.detector.min_spread_ratio); break;
     case PROP_MAX_DECODE_ERROR: g_value_set_double(value, s.detector.max_decode_error); break;
     case PROP_MAX_CELL_RESIDUAL: g_value_set_double(value, s.detector.max_cell_residual); break;
@@ -1036,7 +1022,7 @@ static gboolean gst_lftag_detect_src_event(GstBaseTransform* trans, GstEvent* ev
 }
 
 /* What the per-frame bounds cut in a frame, named by the bound that was hit (the
- * candidate budget, max-candidates; the second looks' bound; the 32 outline reads),
+ * candidate budget, max-candidates; the second looks' bound; lftag::kMaxOutlineReads),
  * with only the counts that are not 0: "held more candidate markers than the
  * per-frame budget allows (max-candidates=1): 2 candidates were skipped, ...". */
 static std::string gst_lftag_detect_budget_text(const lftag::DetectionStats& stats,
@@ -1048,7 +1034,8 @@ static std::string gst_lftag_detect_budget_text(const lftag::DetectionStats& sta
                      std::to_string(params.max_candidates) + ")");
   else if (stats.second_looks_skipped > 0)
     bounds.push_back("needed more second looks than the per-frame bound of " + std::to_string(params.max_second_looks));
-  if (stats.outline_reads_skipped > 0) bounds.push_back("needed more outline reads than the per-frame bound of 32");
+  if (stats.outline_reads_skipped > 0)
+    bounds.push_back("needed more outline reads than the per-frame bound of " + std::to_string(lftag::kMaxOutlineReads));
   const auto count = [&](std::int64_t n, const char* one, const char* many) {
     if (n > 0) counts.push_back(std::to_string(n) + " " + (n == 1 ? one : many));
   };

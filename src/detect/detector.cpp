@@ -345,7 +345,7 @@ bool look_at_patch(const ImageView& image, cv::Rect box, const detail::SecondLoo
 // The marker in a second look's patch whose squares its binary image could not separate:
 // its outline aligned and its cells read from the grey levels (outline.cpp), then posed
 // from the squares' centres under the aligned outline like any other detection.
-// `reads_left`: the frame's remaining outline reads (detail::kMaxOutlineReads a frame).
+// `reads_left`: the frame's remaining outline reads (kMaxOutlineReads a frame).
 void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& frame, const ImageView& work,
                    const Camera& camera, const DetectorParams& p, const detail::Deadline& deadline,
                    DetectionStats& stats, std::vector<Detection>& found, int& reads_left,
@@ -368,12 +368,12 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
 // Each is taken only as the family and id expected: another id there is refused (a
 // marker that crossed the expected one, which the search finds by itself, or a
 // misreading: a wrong id is worse than a miss). The outline reads are bounded as the
-// second look's are (detail::kMaxOutlineReads a frame), and all of it by the deadline.
+// second look's are (kMaxOutlineReads a frame), and all of it by the deadline.
 void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView& work, const Camera& camera,
                    const DetectorParams& p, const detail::Deadline& deadline, detail::RegionLabeller& labeller,
                    PatchLook& patch_look, int* budget_left, DetectionStats& stats, std::vector<Detection>& found,
                    detail::ReadPlaces& read_places, DetectionTrace* trace) {
-  int reads_left = detail::kMaxOutlineReads;
+  int reads_left = kMaxOutlineReads;
   const auto is_expected = [](const ExpectedMarker& e, const Detection& d) {
     return d.family == e.family && d.id == e.id;
   };
@@ -561,7 +561,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints
     for (const Detection& d : found)
       taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
     std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, image, look, taken);
-    int outline_reads_left = detail::kMaxOutlineReads;
+    int outline_reads_left = kMaxOutlineReads;
     if (int(boxes.size()) > p.max_second_looks) {
       stats.second_looks_skipped += std::int64_t(boxes.size()) - p.max_second_looks;
       boxes.resize(p.max_second_looks);

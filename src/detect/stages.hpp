@@ -364,9 +364,6 @@ constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContr
 // and detector tests' renders at the resolution and blur limits, whose right readings had
 // 0.37 (one) and 0.41 or more; the validation set's wrong ones had 0.16 at most.
 constexpr double kMinEvidence = 0.4;
-// Outline reads a frame at most (each outline and family is one): the work bound of a
-// frame full of marker-like clusters, where every read aligns a template.
-constexpr int kMaxOutlineReads = 32;
 constexpr double kMaxSmear = 5;  // units: a motion blur must leave a unit of the cells' 6-unit pitch unsmeared
 // The first check `reading` fails (Stage::detected when it passes them all), and whether
 // it passes them all.

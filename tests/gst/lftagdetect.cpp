@@ -881,7 +881,6 @@ GST_START_TEST(test_message_modes) {
   };
 
   fail_unless_equals_int(messages_for("messages=none").size(), 0);
-  fail_unless_equals_int(messages_for("message=false").size(), 0);
 
   std::vector<Posted> posted = messages_for("");  // with-markers, the default
   fail_unless_equals_int(posted.size(), 5);
@@ -948,29 +947,8 @@ GST_START_TEST(test_message_compact_by_default) {
 }
 GST_END_TEST;
 
-// The old boolean still works: FALSE is none, TRUE brings back with-markers.
-GST_START_TEST(test_message_property_compatible) {
-  GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
-  gint mode;
-  gboolean message;
-  g_object_get(e, "messages", &mode, "message", &message, nullptr);
-  fail_unless(mode == GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS && message);
-  g_object_set(e, "message", FALSE, nullptr);
-  g_object_get(e, "messages", &mode, "message", &message, nullptr);
-  fail_unless(mode == GST_LFTAG_DETECT_MESSAGES_NONE && !message);
-  g_object_set(e, "message", TRUE, nullptr);
-  g_object_get(e, "messages", &mode, nullptr);
-  fail_unless(mode == GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS);
-  gst_util_set_object_arg(G_OBJECT(e), "messages", "on-change");
-  g_object_set(e, "message", TRUE, nullptr);  // already posting: unchanged
-  g_object_get(e, "messages", &mode, nullptr);
-  fail_unless(mode == GST_LFTAG_DETECT_MESSAGES_ON_CHANGE);
-  gst_object_unref(e);
-}
-GST_END_TEST;
-
 GST_START_TEST(test_message_switch_and_empty_frames) {
-  fail_unless_equals_int(count_and_free(run_to_eos("lftagtestsrc num-buffers=5 ! lftagdetect message=false ! fakesink",
+  fail_unless_equals_int(count_and_free(run_to_eos("lftagtestsrc num-buffers=5 ! lftagdetect messages=none ! fakesink",
                                                    GST_MESSAGE_ELEMENT)),
                          0);
   // No message for a frame without markers.
@@ -1018,11 +996,12 @@ GST_START_TEST(test_properties) {
   gchar* distortion = nullptr;
   double tag_size;
   guint overlay;
-  gboolean message;
-  g_object_get(e, "families", &families, "tag-size", &tag_size, "overlay", &overlay, "message", &message, "distortion",
-               &distortion, nullptr);
+  gint messages;
+  g_object_get(e, "families", &families, "tag-size", &tag_size, "overlay", &overlay, "messages", &messages,
+               "distortion", &distortion, nullptr);
   fail_unless_equals_string(families, "3x3,4x4");
-  fail_unless(tag_size == 0.1 && overlay == 0 && message && distortion == nullptr);
+  fail_unless(tag_size == 0.1 && overlay == 0 && messages == GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS &&
+              distortion == nullptr);
   g_free(families);
   gboolean second_look = FALSE;
   g_object_get(e, "second-look", &second_look, nullptr);
@@ -2062,7 +2041,6 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_messages);
   tcase_add_test(tc, test_message_modes);
   tcase_add_test(tc, test_message_compact_by_default);
-  tcase_add_test(tc, test_message_property_compatible);
   tcase_add_test(tc, test_message_switch_and_empty_frames);
   tcase_add_test(tc, test_message_times_after_seek);
   tcase_add_test(tc, test_properties);

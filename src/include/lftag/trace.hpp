@@ -18,6 +18,11 @@
 
 namespace lftag {
 
+// Outline reads a frame at most (each outline and family is one): the work bound of a
+// frame full of marker-like clusters, where every read aligns a template. The reads it
+// cuts are counted in DetectionStats::outline_reads_skipped.
+constexpr int kMaxOutlineReads = 32;
+
 // How many candidates each stage let through, and how long each stage took, for one
 // frame or (with +=) many: the paper's false-positive funnel and timing tables.
 struct DetectionStats {
@@ -36,7 +41,7 @@ struct DetectionStats {
   std::int64_t second_look_found = 0;  // detections made in them (outline readings included)
   std::int64_t outline_reads = 0;      // outlines aligned and read where a patch gave no candidate
   std::int64_t outline_found = 0;      // detections read from outlines
-  std::int64_t outline_reads_skipped = 0;  // outline reads not made: the frame's bound (32) was reached
+  std::int64_t outline_reads_skipped = 0;  // outline reads not made: kMaxOutlineReads was reached
   std::int64_t expected_reads = 0;     // expected markers (FrameHints) looked for where expected
   std::int64_t expected_found = 0;     // detections found so
   std::int64_t skipped_by_budget = 0;  // candidates not decoded: DetectorParams::max_candidates was spent
