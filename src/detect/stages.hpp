@@ -354,7 +354,12 @@ constexpr double kMinSharpStartCorrelation = 0.55, kSharpPixelsPerUnit = 1.5;
 // Aligned, below which no motion blur or defocus is sought. A 31 px 4x4 at 60 degrees of
 // tilt, defocused by 1.45 px, aligned at 0.58 to 0.60 before its defocus took it to 0.76.
 constexpr double kMinSmearedCorrelation = 0.55;
-constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContrast = 16, kMinMargin = 0.03, kMinBaselineGap = 0.25;
+constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContrast = 16, kMinMargin = 0.03;
+// The turn: the two corners taken as the baselines must look more like baselines than
+// the other two by this fraction of the contrast (OutlineReading::baseline_gap). A round
+// quarter, not tuned on any set: sharp markers show 0.74 to 0.91, and glare that
+// lightens one baseline's outer strip takes it below (test_outline's boundary test).
+constexpr double kMinBaselineGap = 0.25;
 // Every data cell must show this much of the difference between its square's position and
 // each other one (OutlineReading::evidence): a cell under it lies within 0.3 of the way
 // from halfway, where compression or noise decides the digit (the blobs' counterpart is
