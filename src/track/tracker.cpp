@@ -8,6 +8,7 @@
 #include <utility>
 
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace lftag {
 namespace {
@@ -354,15 +355,24 @@ std::vector<TrackedMarker> Tracker::update(double time, const std::vector<Detect
       kept.push_back(std::move(track));
       continue;
     }
-    if (time - track.info.last_seen > params_.lost_after) {
-      TrackedMarker m{track.last, track.info};
+    TrackedMarker m = predicted(track, time);
+    // Two markers cannot lie in one place: a track of a single detection whose predicted
+    // centre this frame measured inside another marker was a misreading of that marker
+    // (a track measured in several frames is hidden by it, and predicted).
+    const bool single = track.info.last_seen == track.info.first_seen;
+    const bool superseded = single && std::any_of(detections.begin(), detections.end(), [&](const Detection& d) {
+      const std::vector<cv::Point2f> outline(d.corners.begin(), d.corners.end());
+      return (d.family != track.last.family || d.id != track.last.id) &&
+             cv::pointPolygonTest(outline, cv::Point2f(m.detection.center), false) >= 0;
+    });
+    if (superseded || time - track.info.last_seen > params_.lost_after) {
+      m = TrackedMarker{track.last, track.info};
       m.track.state = TrackState::lost;
       m.track.time = time;
       m.track.flipped = false;
       lost_.push_back(std::move(m));
       continue;
     }
-    TrackedMarker m = predicted(track, time);
     track.info.state = TrackState::predicted;
     track.info.time = time;
     smooth(track, m);

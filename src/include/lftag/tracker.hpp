@@ -27,7 +27,8 @@ namespace lftag {
 enum class TrackState {
   measured,   // detected in this frame
   predicted,  // not detected in this frame: where the motion model puts it
-  lost,       // unseen for longer than TrackerParams::lost_after: the track has ended
+  lost,       // unseen for longer than TrackerParams::lost_after, or a track of one detection
+              // whose predicted centre this frame measured inside another marker: ended
 };
 const char* track_state_name(TrackState state);  // "measured", "predicted", "lost"
 
