@@ -1035,7 +1035,8 @@ static std::string gst_lftag_detect_budget_text(const lftag::DetectionStats& sta
   else if (stats.second_looks_skipped > 0)
     bounds.push_back("needed more second looks than the per-frame bound of " + std::to_string(params.max_second_looks));
   if (stats.outline_reads_skipped > 0)
-    bounds.push_back("needed more outline reads than the per-frame bound of " + std::to_string(lftag::kMaxOutlineReads));
+    bounds.push_back("needed more outline reads than the per-frame bound of " +
+                     std::to_string(lftag::kMaxOutlineReads));
   const auto count = [&](std::int64_t n, const char* one, const char* many) {
     if (n > 0) counts.push_back(std::to_string(n) + " " + (n == 1 ? one : many));
   };
