@@ -122,6 +122,7 @@
 #include "elementcamera.h"
 #include "metaconversion.h"
 #include "propertystate.h"
+#include "tunables.hpp"
 
 GST_DEBUG_CATEGORY_STATIC(gst_lftag_detect_debug);
 #define GST_CAT_DEFAULT gst_lftag_detect_debug
@@ -130,25 +131,12 @@ enum {
   PROP_0,
   PROP_FAMILIES,
   PROP_TAG_SIZE,
-  PROP_CALIBRATION_FILE,
-  PROP_FX,
-  PROP_FY,
-  PROP_CX,
-  PROP_CY,
-  PROP_DISTORTION,
-  PROP_OVERLAY,
+  PROP_CAMERA, /* lftag::gst::kCameraProperties ids: fx, fy, cx, cy, calibration-file, distortion */
+  PROP_OVERLAY = PROP_CAMERA + lftag::gst::kCameraProperties,
   PROP_MESSAGES,
   PROP_MESSAGE_DETECTIONS,
-  PROP_THRESHOLD_WINDOW,
-  PROP_THRESHOLD_OFFSET,
-  PROP_SECOND_LOOK,
-  PROP_MAX_INK_RATIO,
-  PROP_MIN_SPREAD_RATIO,
-  PROP_MAX_DECODE_ERROR,
-  PROP_MAX_CELL_RESIDUAL,
-  PROP_LATE_FRAMES,
-  PROP_MAX_CANDIDATES,
-  PROP_DEADLINE,
+  PROP_TUNABLE, /* lftag::io::kTunables ids, the detector's parameters in lftag::io::tunables() order */
+  PROP_LATE_FRAMES = PROP_TUNABLE + lftag::io::kTunables,
   PROP_TRACKING,
   PROP_LOST_AFTER,
   PROP_SMOOTHING,
@@ -159,18 +147,14 @@ enum {
 
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
 #define DEFAULT_PROP_TAG_SIZE 0.1
-#define DEFAULT_PROP_CALIBRATION_FILE nullptr
-#define DEFAULT_PROP_FOCAL lftag::gst::kUnsetFocal
-#define DEFAULT_PROP_PRINCIPAL lftag::gst::kUnsetPrincipal
-#define DEFAULT_PROP_DISTORTION nullptr
 #define DEFAULT_PROP_OVERLAY 0
 #define DEFAULT_PROP_MESSAGES GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS
 #define DEFAULT_PROP_MESSAGE_DETECTIONS FALSE
 #define DEFAULT_PROP_LATE_FRAMES GST_LFTAG_DETECT_LATE_FRAMES_ANALYSE
 #define DEFAULT_PROP_TRACKING FALSE
 #define DEFAULT_PROP_FULL_DETECTION_INTERVAL 1
-/* The tracker's own parameters default to the library's (TrackerParams). */
-/* The detector's own parameters default to the library's (DetectorParams). */
+/* The tracker's own parameters default to the library's (TrackerParams), the detector's
+ * to lftag::io::front_end_defaults(). */
 
 #define DETECT_FORMATS                                                            \
   "{ GRAY8, I420, YV12, NV12, NV21, Y42B, Y444, RGB, BGR, "                       \
@@ -212,35 +196,23 @@ using lftag::Camera;
 using lftag::Detection;
 using lftag::Family;
 
-/* Everything the detector is built from. */
+/* Everything the detector is built from but the calibration. */
 struct DetectorSettings {
-  std::vector<Family> families;
-  double tag_size = DEFAULT_PROP_TAG_SIZE;
-  std::optional<double> fx, fy, cx, cy; /* empty: not set */
-  std::vector<double> distortion;
-  int threshold_window = 0, threshold_offset = 0;
-  bool second_look = true;
-  double max_ink_ratio = 0, min_spread_ratio = 0, max_decode_error = 0, max_cell_residual = 0;
-  int max_candidates = 0;
-  double deadline_ms = lftag::kLiveDeadlineMs;
+  lftag::DetectorParams params; /* no camera: it is the frame's */
+  lftag::PinholeSettings pinhole;
 
-  auto tie() const {
-    return std::tie(families, tag_size, fx, fy, cx, cy, distortion, threshold_window, threshold_offset, second_look,
-                    max_ink_ratio, min_spread_ratio, max_decode_error, max_cell_residual, max_candidates, deadline_ms);
-  }
-  bool operator==(const DetectorSettings& o) const { return tie() == o.tie(); }
+  bool operator==(const DetectorSettings& o) const { return params == o.params && pinhole == o.pinhole; }
   bool operator!=(const DetectorSettings& o) const { return !(*this == o); }
 };
 
 /* What the properties say; guarded by the object lock. */
 struct Settings {
-  DetectorSettings detector;
+  lftag::DetectorParams detector = lftag::io::front_end_defaults(); /* families, tag size, the tunables */
+  lftag::gst::CameraSettings camera;
   std::string families_text = DEFAULT_PROP_FAMILIES;
-  std::string distortion_text;
-  std::string calibration_file;
   bool tag_size_set = false; /* a metric pose was asked for */
-  /* Refused values (lftag::gst::refuse_value), until a good value clears them. */
-  std::string families_error, distortion_error, cx_error, cy_error;
+  /* A refused value (lftag::gst::refuse_value), until a good value clears it. */
+  std::string families_error;
   guint overlay = DEFAULT_PROP_OVERLAY;
   GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
   bool message_detections = DEFAULT_PROP_MESSAGE_DETECTIONS;
@@ -249,17 +221,8 @@ struct Settings {
   guint full_detection_interval = DEFAULT_PROP_FULL_DETECTION_INTERVAL;
   lftag::TrackerParams tracker;
 
-  Settings() {
-    const lftag::DetectorParams defaults;
-    detector.families = Family::parse_list(DEFAULT_PROP_FAMILIES);
-    detector.threshold_window = defaults.threshold_window;
-    detector.threshold_offset = defaults.threshold_offset;
-    detector.second_look = defaults.second_look;
-    detector.max_ink_ratio = defaults.max_ink_ratio;
-    detector.min_spread_ratio = defaults.min_spread_ratio;
-    detector.max_cell_residual = defaults.max_cell_residual;
-    detector.max_candidates = defaults.max_candidates;
-  }
+  Settings() { detector.families = Family::parse_list(DEFAULT_PROP_FAMILIES); }
+  DetectorSettings detector_settings() const { return {detector, camera.pinhole}; }
 };
 
 /* Per-stream state, used by the streaming thread only (start, stop, caps and
@@ -273,7 +236,8 @@ struct State {
   bool ask_downstream = true;      /* whether it takes overlay compositions */
   bool attach_composition = false; /* its answer: attach, else blend */
   std::optional<lftag::Detector> detector;
-  DetectorSettings built, rejected; /* the detector's settings; a set that failed */
+  DetectorSettings built;                   /* the detector's settings */
+  std::optional<DetectorSettings> rejected; /* the last set that failed, until one succeeds */
   bool warned_uncalibrated = false;
   lftag::gst::DetectMessages messages;
   guint64 analysed = 0, skipped = 0;     /* frames, for QoS messages */
@@ -292,45 +256,9 @@ struct Lateness {
   gdouble proportion;
 };
 
-/* "k1,k2,p1,p2[,k3[,k4,k5,k6]]" as OpenCV orders them, with a decimal point
- * whatever the locale. Throws std::invalid_argument. */
-std::vector<double> parse_distortion(const std::string& text) {
-  std::vector<double> values;
-  std::istringstream in(text);
-  std::string item;
-  while (std::getline(in, item, ',')) {
-    gchar* end = nullptr;
-    const double v = g_ascii_strtod(item.c_str(), &end);
-    if (end == item.c_str() || item.find_first_not_of(" \t", end - item.c_str()) != std::string::npos ||
-        !std::isfinite(v))
-      throw std::invalid_argument("'" + item + "' is not a number");
-    values.push_back(v);
-  }
-  if (values.size() != 4 && values.size() != 5 && values.size() != 8)
-    throw std::invalid_argument(
-        "it needs 4, 5 or 8 comma-separated coefficients "
-        "(k1,k2,p1,p2[,k3[,k4,k5,k6]]), not " +
-        std::to_string(values.size()));
-  return values;
-}
-
-/* The hand-set camera of the settings. */
-static lftag::gst::PinholeSettings pinhole(const DetectorSettings& s) { return {s.fx, s.fy, s.cx, s.cy, s.distortion}; }
-
 lftag::DetectorParams detector_params(const DetectorSettings& s, const Camera& camera) {
-  lftag::DetectorParams p;
-  p.families = s.families;
-  p.tag_size = s.tag_size;
+  lftag::DetectorParams p = s.params;
   p.camera = camera;
-  p.threshold_window = s.threshold_window;
-  p.threshold_offset = s.threshold_offset;
-  p.second_look = s.second_look;
-  p.max_ink_ratio = s.max_ink_ratio;
-  p.min_spread_ratio = s.min_spread_ratio;
-  p.max_cell_residual = s.max_cell_residual;
-  p.max_candidates = s.max_candidates;
-  p.deadline_ms = s.deadline_ms;
-  if (s.max_decode_error > 0) p.max_decode_error.fill(s.max_decode_error);
   return p;
 }
 
@@ -392,10 +320,9 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
   GstBaseTransformClass* trans_class = GST_BASE_TRANSFORM_CLASS(klass);
   GstVideoFilterClass* filter_class = GST_VIDEO_FILTER_CLASS(klass);
   const auto playing = GParamFlags(G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS | GST_PARAM_MUTABLE_PLAYING);
-  const auto ready = GParamFlags(G_PARAM_READWRITE | G_PARAM_STATIC_STRINGS | GST_PARAM_MUTABLE_READY);
   /* Static: GCC 12 takes the empty optional camera of a local one for uninitialised
    * (-Wmaybe-uninitialized) when class_init inlines its destructor. */
-  static const lftag::DetectorParams defaults;
+  static const lftag::DetectorParams defaults = lftag::io::front_end_defaults();
 
   GST_DEBUG_CATEGORY_INIT(gst_lftag_detect_debug, "lftagdetect", 0, "LFTag marker detector");
 
@@ -415,46 +342,15 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                           "Outer edge of the markers' black border in metres: the scale of the "
                           "poses (tvec) and of the drawn axes. Metric only with a calibrated camera",
                           0.001, 100.0, DEFAULT_PROP_TAG_SIZE, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_CALIBRATION_FILE,
-      g_param_spec_string("calibration-file", "Calibration file",
-                          "OpenCV camera calibration (YAML, XML or JSON with camera_matrix and "
-                          "distortion_coefficients, as OpenCV's calibration samples write, or "
-                          "cameraMatrix and distCoeffs, as cameracalibrate writes). Used instead of "
-                          "fx, fy, cx, cy and distortion; scaled to the frame when it records "
-                          "image_width and image_height, which must then have the frame's shape",
-                          DEFAULT_PROP_CALIBRATION_FILE, ready));
-  g_object_class_install_property(
-      gobject_class, PROP_FX,
-      g_param_spec_double("fx", "Focal length x",
-                          "Horizontal focal length in pixels, for poses. 0 (the default) is \"not set\": "
-                          "poses then assume fx = fy = frame width, centred, and are marked uncalibrated",
-                          0.0, lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_FY,
-      g_param_spec_double("fy", "Focal length y",
-                          "Vertical focal length in pixels, with fx. 0 (the default) is \"not set\": equal to fx", 0.0,
-                          lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_CX,
-      g_param_spec_double("cx", "Principal point x",
-                          "Principal point x in pixels, with fx: 0 to 1e6, pixel centres at integers "
-                          "(0 is the left pixel column). -1 (the default) is \"not set\": the frame centre; "
-                          "values between -1 and 0 are refused",
-                          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_CY,
-      g_param_spec_double("cy", "Principal point y",
-                          "Principal point y in pixels, with fx: 0 to 1e6, pixel centres at integers "
-                          "(0 is the top pixel row). -1 (the default) is \"not set\": the frame centre; "
-                          "values between -1 and 0 are refused",
-                          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_DISTORTION,
-      g_param_spec_string("distortion", "Distortion",
-                          "Lens distortion with fx: k1,k2,p1,p2[,k3[,k4,k5,k6]] as OpenCV orders "
-                          "them, comma-separated (unset: none)",
-                          DEFAULT_PROP_DISTORTION, playing));
+  lftag::gst::install_camera_properties(
+      gobject_class, PROP_CAMERA, playing,
+      {"Horizontal focal length in pixels, for poses. 0 (the default) is \"not set\": poses then assume fx = fy = "
+       "frame width, centred, and are marked uncalibrated",
+       "OpenCV camera calibration (YAML, XML or JSON with camera_matrix and distortion_coefficients, as OpenCV's "
+       "calibration samples write, or cameraMatrix and distCoeffs, as cameracalibrate writes). Used instead of fx, "
+       "fy, cx, cy and distortion; scaled to the frame when it records image_width and image_height, which must "
+       "then have the frame's shape"},
+      true);
   g_object_class_install_property(
       gobject_class, PROP_OVERLAY,
       g_param_spec_flags("overlay", "Overlay",
@@ -476,49 +372,23 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                            "poses, about 2.3 KB a marker) at the end of each \"lftag\" message; by default "
                            "a message holds the timestamps, ids, centres, appeared, vanished and frame size only",
                            DEFAULT_PROP_MESSAGE_DETECTIONS, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_THRESHOLD_WINDOW,
-      g_param_spec_int("threshold-window", "Threshold window",
-                       "Side in pixels of the window whose mean grey level a pixel must be below "
-                       "to count as black (the paper's M). Larger suits large markers",
-                       2, 1024, defaults.threshold_window, playing));
-  g_object_class_install_property(gobject_class, PROP_THRESHOLD_OFFSET,
-                                  g_param_spec_int("threshold-offset", "Threshold offset",
-                                                   "Grey levels below the window's mean for a pixel to count as black; "
-                                                   "raising it ignores faint texture and noise",
-                                                   0, 255, defaults.threshold_offset, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_SECOND_LOOK,
-      g_param_spec_boolean("second-look", "Second look",
-                           "Look again, enlarged and with a local threshold, at small isolated "
-                           "clusters where no marker was found: far, small and motion-blurred markers",
-                           defaults.second_look, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_MAX_INK_RATIO,
-      g_param_spec_double("max-ink-ratio", "Maximum ink ratio",
-                          "tau1: a candidate is rejected when its largest black square holds more "
-                          "than this many times the ink of its smallest, once perspective is taken "
-                          "out (the design ratio is 1.78)",
-                          1.0, 100.0, defaults.max_ink_ratio, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_MIN_SPREAD_RATIO,
-      g_param_spec_double("min-spread-ratio", "Minimum spread ratio",
-                          "tau2: a candidate is rejected when its squares' centres are this close to "
-                          "collinear (minor to major axis of their scatter)",
-                          0.0, 1.0, defaults.min_spread_ratio, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_MAX_DECODE_ERROR,
-      g_param_spec_double("max-decode-error", "Maximum decoding error",
-                          "tau3: a reading is rejected when its decoding error exceeds this, for "
-                          "every family (0: each family's calibrated default; the paper's 5e-4 for "
-                          "3x3 and 1e-3 for 4x4)",
-                          0.0, 1.0, 0.0, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_MAX_CELL_RESIDUAL,
-      g_param_spec_double("max-cell-residual", "Maximum cell residual",
-                          "A reading is rejected when a square lies further than this from its "
-                          "decoded position, in marker units (positions are 1 unit apart)",
-                          0.01, 1.0, defaults.max_cell_residual, playing));
+  for (guint i = 0; i < lftag::io::kTunables; ++i) {
+    const lftag::io::Tunable& t = lftag::io::tunables()[i];
+    const double value = t.get(defaults);
+    GParamSpec* spec = nullptr;
+    switch (t.kind) {
+      case lftag::io::Tunable::Kind::integer:
+        spec = g_param_spec_int(t.name, t.nick, t.blurb, gint(t.min), gint(t.max), gint(value), playing);
+        break;
+      case lftag::io::Tunable::Kind::real:
+        spec = g_param_spec_double(t.name, t.nick, t.blurb, t.min, t.max, value, playing);
+        break;
+      case lftag::io::Tunable::Kind::boolean:
+        spec = g_param_spec_boolean(t.name, t.nick, t.blurb, value != 0, playing);
+        break;
+    }
+    g_object_class_install_property(gobject_class, PROP_TUNABLE + i, spec);
+  }
   g_object_class_install_property(
       gobject_class, PROP_LATE_FRAMES,
       g_param_spec_enum("late-frames", "Late frames",
@@ -526,24 +396,6 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                         "analyse it anyway, or pass it on unanalysed (its LFTagMeta has "
                         "\"analysed\" FALSE, and a QoS message counts it). No frame is ever dropped",
                         GST_TYPE_LFTAG_DETECT_LATE_FRAMES, DEFAULT_PROP_LATE_FRAMES, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_MAX_CANDIDATES,
-      g_param_spec_int("max-candidates", "Candidates per frame",
-                       "Work budget per frame: at most this many candidate markers (white "
-                       "regions holding n x n black squares) are examined, the most plausible "
-                       "first; the rest are skipped, so that a frame full of look-alikes (a "
-                       "tiled wall, a perforated sheet) cannot stall the stream. The first "
-                       "frame cut posts a warning. 0: no limit",
-                       0, G_MAXINT, defaults.max_candidates, playing));
-  g_object_class_install_property(
-      gobject_class, PROP_DEADLINE,
-      g_param_spec_double("deadline", "Deadline per frame (ms)",
-                          "Milliseconds of processor time a frame's detection may take: once they are spent, its "
-                          "optional work (the second looks at far or blurred markers, and their outline reads) is "
-                          "skipped, so that no frame of look-alikes or sensor noise stalls a live stream; the "
-                          "frame's own candidates are always examined. The first frame cut posts a warning. 0: no "
-                          "deadline (every frame gets all its work, as in lftag::Detector)",
-                          0, 1e7, lftag::kLiveDeadlineMs, playing));
   static const lftag::TrackerParams track_defaults;
   g_object_class_install_property(
       gobject_class, PROP_TRACKING,
@@ -639,62 +491,55 @@ static void gst_lftag_detect_finalize(GObject* object) {
   G_OBJECT_CLASS(parent_class)->finalize(object);
 }
 
+/* The camera property or tunable a property id is, if it is one. */
+static std::optional<lftag::gst::CameraProperty> camera_property(guint prop_id) {
+  if (prop_id < PROP_CAMERA || prop_id >= PROP_CAMERA + lftag::gst::kCameraProperties) return std::nullopt;
+  return lftag::gst::CameraProperty(prop_id - PROP_CAMERA);
+}
+
+static const lftag::io::Tunable* tunable(guint prop_id) {
+  if (prop_id < PROP_TUNABLE || prop_id >= PROP_TUNABLE + lftag::io::kTunables) return nullptr;
+  return &lftag::io::tunables()[prop_id - PROP_TUNABLE];
+}
+
 static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const GValue* value, GParamSpec* pspec) {
   GstLFTagDetect* self = GST_LFTAG_DETECT(object);
   if (!lftag::gst::property_settable_now(GST_ELEMENT(self), pspec)) return;
-  std::vector<Family> families;
-  std::vector<double> distortion;
-  const gchar* text = nullptr;
-  std::string families_text;
+  if (const auto which = camera_property(prop_id)) {
+    lftag::gst::set_camera_property(GST_ELEMENT(self), self->settings->camera, *which, value);
+    return;
+  }
 
-  /* Text is parsed outside the lock; bad text is refused and changes nothing. */
-  switch (prop_id) {
-    case PROP_FAMILIES:
-      /* "3x3, 4X4" is read as 3x3,4x4. A value that names no family is refused
-       * on the bus (a warning now, while playing; an error when the element
-       * starts, for a value set before it had a bus) and the families stay. */
-      text = g_value_get_string(value);
-      try {
-        families = Family::parse_list(text ? text : DEFAULT_PROP_FAMILIES);
-        for (const Family& f : families) families_text += (families_text.empty() ? "" : ",") + f.name();
-      } catch (const std::exception& e) {
-        const std::string refusal = lftag::gst::refuse_value(GST_ELEMENT(self), "families", text, e.what());
-        GST_OBJECT_LOCK(self);
-        self->settings->families_error = refusal;
-        GST_OBJECT_UNLOCK(self);
-        return;
-      }
-      break;
-    case PROP_DISTORTION:
-      text = g_value_get_string(value);
-      try {
-        if (text && *text) distortion = parse_distortion(text);
-      } catch (const std::exception& e) {
-        const std::string refusal = lftag::gst::refuse_value(GST_ELEMENT(self), "distortion", text, e.what());
-        GST_OBJECT_LOCK(self);
-        self->settings->distortion_error = refusal;
-        GST_OBJECT_UNLOCK(self);
-        return;
-      }
-      break;
-    case PROP_CX:
-    case PROP_CY: {
-      /* Between -1 ("not set") and 0: neither, so refused as text is. */
-      const std::string refusal =
-          lftag::gst::refuse_principal(GST_ELEMENT(self), pspec->name, g_value_get_double(value));
-      if (!refusal.empty()) {
-        GST_OBJECT_LOCK(self);
-        (prop_id == PROP_CX ? self->settings->cx_error : self->settings->cy_error) = refusal;
-        GST_OBJECT_UNLOCK(self);
-        return;
-      }
-      break;
+  std::vector<Family> families;
+  std::string families_text;
+  if (prop_id == PROP_FAMILIES) {
+    /* "3x3, 4X4" is read as 3x3,4x4. A value that names no family is refused on the bus
+     * (a warning now, while playing; an error when the element starts, for a value set
+     * before it had a bus) and the families stay. Text is parsed outside the lock. */
+    const gchar* text = g_value_get_string(value);
+    try {
+      families = Family::parse_list(text ? text : DEFAULT_PROP_FAMILIES);
+      for (const Family& f : families) families_text += (families_text.empty() ? "" : ",") + f.name();
+    } catch (const std::exception& e) {
+      const std::string refusal = lftag::gst::refuse_value(GST_ELEMENT(self), "families", text, e.what());
+      GST_OBJECT_LOCK(self);
+      self->settings->families_error = refusal;
+      GST_OBJECT_UNLOCK(self);
+      return;
     }
-    default: break;
   }
 
   GST_OBJECT_LOCK(self);
   Settings& s = *self->settings;
+  if (const lftag::io::Tunable* t = tunable(prop_id)) {
+    switch (t->kind) {
+      case lftag::io::Tunable::Kind::integer: t->set(s.detector, g_value_get_int(value)); break;
+      case lftag::io::Tunable::Kind::real: t->set(s.detector, g_value_get_double(value)); break;
+      case lftag::io::Tunable::Kind::boolean: t->set(s.detector, g_value_get_boolean(value)); break;
+    }
+    GST_OBJECT_UNLOCK(self);
+    return;
+  }
   switch (prop_id) {
     case PROP_FAMILIES:
       s.families_text = families_text;
@@ -705,35 +550,10 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
       s.detector.tag_size = g_value_get_double(value);
       s.tag_size_set = true;
       break;
-    case PROP_CALIBRATION_FILE: s.calibration_file = g_value_get_string(value) ? g_value_get_string(value) : ""; break;
-    case PROP_FX: s.detector.fx = lftag::gst::focal_from_property(g_value_get_double(value)); break;
-    case PROP_FY: s.detector.fy = lftag::gst::focal_from_property(g_value_get_double(value)); break;
-    case PROP_CX:
-      s.cx_error.clear();
-      s.detector.cx = lftag::gst::principal_from_property(g_value_get_double(value));
-      break;
-    case PROP_CY:
-      s.cy_error.clear();
-      s.detector.cy = lftag::gst::principal_from_property(g_value_get_double(value));
-      break;
-    case PROP_DISTORTION:
-      s.distortion_error.clear();
-      s.distortion_text = distortion.empty() ? "" : text;
-      s.detector.distortion = std::move(distortion);
-      break;
     case PROP_OVERLAY: s.overlay = g_value_get_flags(value); break;
     case PROP_MESSAGES: s.messages = GstLFTagDetectMessages(g_value_get_enum(value)); break;
     case PROP_MESSAGE_DETECTIONS: s.message_detections = g_value_get_boolean(value); break;
     case PROP_LATE_FRAMES: s.late_frames = GstLFTagDetectLateFrames(g_value_get_enum(value)); break;
-    case PROP_THRESHOLD_WINDOW: s.detector.threshold_window = g_value_get_int(value); break;
-    case PROP_THRESHOLD_OFFSET: s.detector.threshold_offset = g_value_get_int(value); break;
-    case PROP_SECOND_LOOK: s.detector.second_look = g_value_get_boolean(value); break;
-    case PROP_MAX_INK_RATIO: s.detector.max_ink_ratio = g_value_get_double(value); break;
-    case PROP_MIN_SPREAD_RATIO: s.detector.min_spread_ratio = g_value_get_double(value); break;
-    case PROP_MAX_DECODE_ERROR: s.detector.max_decode_error = g_value_get_double(value); break;
-    case PROP_MAX_CELL_RESIDUAL: s.detector.max_cell_residual = g_value_get_double(value); break;
-    case PROP_MAX_CANDIDATES: s.detector.max_candidates = g_value_get_int(value); break;
-    case PROP_DEADLINE: s.detector.deadline_ms = g_value_get_double(value); break;
     case PROP_TRACKING: s.tracking = g_value_get_boolean(value); break;
     case PROP_LOST_AFTER: s.tracker.lost_after = g_value_get_double(value); break;
     case PROP_SMOOTHING: s.tracker.smoothing = g_value_get_boolean(value); break;
@@ -747,39 +567,34 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
 
 static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue* value, GParamSpec* pspec) {
   GstLFTagDetect* self = GST_LFTAG_DETECT(object);
-  auto optional_string = [](const std::string& text) { return text.empty() ? nullptr : text.c_str(); };
 
   GST_OBJECT_LOCK(self);
   const Settings& s = *self->settings;
-  switch (prop_id) {
-    case PROP_FAMILIES: g_value_set_string(value, s.families_text.c_str()); break;
-    case PROP_TAG_SIZE: g_value_set_double(value, s.detector.tag_size); break;
-    case PROP_CALIBRATION_FILE: g_value_set_string(value, optional_string(s.calibration_file)); break;
-    case PROP_FX: g_value_set_double(value, lftag::gst::focal_to_property(s.detector.fx)); break;
-    case PROP_FY: g_value_set_double(value, lftag::gst::focal_to_property(s.detector.fy)); break;
-    case PROP_CX: g_value_set_double(value, lftag::gst::principal_to_property(s.detector.cx)); break;
-    case PROP_CY: g_value_set_double(value, lftag::gst::principal_to_property(s.detector.cy)); break;
-    case PROP_DISTORTION: g_value_set_string(value, optional_string(s.distortion_text)); break;
-    case PROP_OVERLAY: g_value_set_flags(value, s.overlay); break;
-    case PROP_MESSAGES: g_value_set_enum(value, s.messages); break;
-    case PROP_MESSAGE_DETECTIONS: g_value_set_boolean(value, s.message_detections); break;
-    case PROP_LATE_FRAMES: g_value_set_enum(value, s.late_frames); break;
-    case PROP_THRESHOLD_WINDOW: g_value_set_int(value, s.detector.threshold_window); break;
-    case PROP_THRESHOLD_OFFSET: g_value_set_int(value, s.detector.threshold_offset); break;
-    case PROP_SECOND_LOOK: g_value_set_boolean(value, s.detector.second_look); break;
-    case PROP_MAX_INK_RATIO: g_value_set_double(value, s.detector.max_ink_ratio); break;
-    case PROP_MIN_SPREAD_RATIO: g_value_set_double(value, s.detector.min_spread_ratio); break;
-    case PROP_MAX_DECODE_ERROR: g_value_set_double(value, s.detector.max_decode_error); break;
-    case PROP_MAX_CELL_RESIDUAL: g_value_set_double(value, s.detector.max_cell_residual); break;
-    case PROP_MAX_CANDIDATES: g_value_set_int(value, s.detector.max_candidates); break;
-    case PROP_DEADLINE: g_value_set_double(value, s.detector.deadline_ms); break;
-    case PROP_TRACKING: g_value_set_boolean(value, s.tracking); break;
-    case PROP_LOST_AFTER: g_value_set_double(value, s.tracker.lost_after); break;
-    case PROP_SMOOTHING: g_value_set_boolean(value, s.tracker.smoothing); break;
-    case PROP_SMOOTHING_MIN_CUTOFF: g_value_set_double(value, s.tracker.min_cutoff); break;
-    case PROP_SMOOTHING_BETA: g_value_set_double(value, s.tracker.beta); break;
-    case PROP_FULL_DETECTION_INTERVAL: g_value_set_uint(value, s.full_detection_interval); break;
-    default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
+  if (const auto which = camera_property(prop_id)) {
+    lftag::gst::get_camera_property(s.camera, *which, value);
+  } else if (const lftag::io::Tunable* t = tunable(prop_id)) {
+    const double v = t->get(s.detector);
+    switch (t->kind) {
+      case lftag::io::Tunable::Kind::integer: g_value_set_int(value, gint(v)); break;
+      case lftag::io::Tunable::Kind::real: g_value_set_double(value, v); break;
+      case lftag::io::Tunable::Kind::boolean: g_value_set_boolean(value, v != 0); break;
+    }
+  } else {
+    switch (prop_id) {
+      case PROP_FAMILIES: g_value_set_string(value, s.families_text.c_str()); break;
+      case PROP_TAG_SIZE: g_value_set_double(value, s.detector.tag_size); break;
+      case PROP_OVERLAY: g_value_set_flags(value, s.overlay); break;
+      case PROP_MESSAGES: g_value_set_enum(value, s.messages); break;
+      case PROP_MESSAGE_DETECTIONS: g_value_set_boolean(value, s.message_detections); break;
+      case PROP_LATE_FRAMES: g_value_set_enum(value, s.late_frames); break;
+      case PROP_TRACKING: g_value_set_boolean(value, s.tracking); break;
+      case PROP_LOST_AFTER: g_value_set_double(value, s.tracker.lost_after); break;
+      case PROP_SMOOTHING: g_value_set_boolean(value, s.tracker.smoothing); break;
+      case PROP_SMOOTHING_MIN_CUTOFF: g_value_set_double(value, s.tracker.min_cutoff); break;
+      case PROP_SMOOTHING_BETA: g_value_set_double(value, s.tracker.beta); break;
+      case PROP_FULL_DETECTION_INTERVAL: g_value_set_uint(value, s.full_detection_interval); break;
+      default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
+    }
   }
   GST_OBJECT_UNLOCK(self);
 }
@@ -807,16 +622,16 @@ static gboolean gst_lftag_detect_start(GstBaseTransform* trans) {
   st.messages.reset();
   st.tracker.reset();
   st.unsearched = 0;
-  if (!lftag::gst::no_refused_values(GST_ELEMENT(self),
-                                     {&s.families_error, &s.distortion_error, &s.cx_error, &s.cy_error}))
+  if (!lftag::gst::no_refused_values(
+          GST_ELEMENT(self), {&s.families_error, &s.camera.distortion_error, &s.camera.cx_error, &s.camera.cy_error}))
     return FALSE;
   st.warned_budget = false;
   st.warned_layout = false;
   st.warned_deadline = false;
-  if (s.calibration_file.empty()) return TRUE;
+  if (s.camera.calibration_file.empty()) return TRUE;
 
-  if (!lftag::gst::load_calibration(GST_ELEMENT(self), s.calibration_file, st.calibration)) return FALSE;
-  const gchar* path = s.calibration_file.c_str();
+  if (!lftag::gst::load_calibration(GST_ELEMENT(self), s.camera.calibration_file, st.calibration)) return FALSE;
+  const gchar* path = s.camera.calibration_file.c_str();
   GST_INFO_OBJECT(self, "calibration from %s: fx %g fy %g cx %g cy %g, %dx%d", path, st.calibration->fx,
                   st.calibration->fy, st.calibration->cx, st.calibration->cy, st.calibration->width,
                   st.calibration->height);
@@ -844,12 +659,12 @@ static gboolean gst_lftag_detect_set_info(GstVideoFilter* filter, GstCaps*, GstV
 
   /* A calibration for another shape of frame fails here, not frame after frame. */
   try {
-    lftag::gst::frame_camera(pinhole(s.detector), st.calibration, width, height);
+    lftag::gst::frame_camera(s.camera.pinhole, st.calibration, width, height);
   } catch (const std::exception& e) {
-    GST_ELEMENT_ERROR(
-        self, CORE, NEGOTIATION,
-        ("Calibration file \"%s\" does not fit %dx%d video: %s.", s.calibration_file.c_str(), width, height, e.what()),
-        (nullptr));
+    GST_ELEMENT_ERROR(self, CORE, NEGOTIATION,
+                      ("Calibration file \"%s\" does not fit %dx%d video: %s.", s.camera.calibration_file.c_str(),
+                       width, height, e.what()),
+                      (nullptr));
     return FALSE;
   }
 
@@ -867,14 +682,15 @@ static gboolean gst_lftag_detect_set_info(GstVideoFilter* filter, GstCaps*, GstV
 static gboolean gst_lftag_detect_update_detector(GstLFTagDetect* self, const Settings& s, const GstVideoInfo* info) {
   State& st = *self->state;
 
-  if (st.detector && (st.built == s.detector || st.rejected == s.detector)) return TRUE;
+  const DetectorSettings wanted = s.detector_settings();
+  if (st.detector && (st.built == wanted || st.rejected == wanted)) return TRUE;
   try {
-    const Camera camera = lftag::gst::frame_camera(pinhole(s.detector), st.calibration, GST_VIDEO_INFO_WIDTH(info),
+    const Camera camera = lftag::gst::frame_camera(wanted.pinhole, st.calibration, GST_VIDEO_INFO_WIDTH(info),
                                                    GST_VIDEO_INFO_HEIGHT(info));
-    st.detector.emplace(detector_params(s.detector, camera));
-    st.built = s.detector;
-    st.rejected = DetectorSettings();
-    const std::string ignored = lftag::gst::ignored_pinhole(pinhole(s.detector), st.calibration.has_value());
+    st.detector.emplace(detector_params(wanted, camera));
+    st.built = wanted;
+    st.rejected.reset();
+    const std::string ignored = lftag::gst::ignored_pinhole(wanted.pinhole, st.calibration.has_value());
     if (!ignored.empty()) GST_ELEMENT_WARNING(self, RESOURCE, SETTINGS, ("%s.", ignored.c_str()), (nullptr));
     GST_DEBUG_OBJECT(self, "detector for %s, camera fx %g fy %g cx %g cy %g%s", s.families_text.c_str(), camera.fx,
                      camera.fy, camera.cx, camera.cy, camera.calibrated ? "" : " (default)");
@@ -885,7 +701,7 @@ static gboolean gst_lftag_detect_update_detector(GstLFTagDetect* self, const Set
     }
     GST_ELEMENT_WARNING(self, RESOURCE, SETTINGS,
                         ("Invalid settings: %s; the detector keeps the previous ones.", e.what()), (nullptr));
-    st.rejected = s.detector;
+    st.rejected = wanted;
   }
   return TRUE;
 }

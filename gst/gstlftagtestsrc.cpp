@@ -72,12 +72,8 @@ enum {
   PROP_NOISE,
   PROP_BACKGROUND,
   PROP_BACKGROUND_LOCATION,
-  PROP_FX,
-  PROP_FY,
-  PROP_CX,
-  PROP_CY,
-  PROP_CALIBRATION_FILE,
-  PROP_SEED,
+  PROP_CAMERA, /* lftag::gst::kCameraProperties ids: fx, fy, cx, cy, calibration-file */
+  PROP_SEED = PROP_CAMERA + lftag::gst::kCameraProperties,
   PROP_IS_LIVE,
 };
 
@@ -90,9 +86,6 @@ enum {
 #define DEFAULT_PROP_NOISE 0.0
 #define DEFAULT_PROP_BACKGROUND GST_LFTAG_TEST_SRC_BACKGROUND_FLAT
 #define DEFAULT_PROP_BACKGROUND_LOCATION nullptr
-#define DEFAULT_PROP_FOCAL lftag::gst::kUnsetFocal
-#define DEFAULT_PROP_PRINCIPAL lftag::gst::kUnsetPrincipal
-#define DEFAULT_PROP_CALIBRATION_FILE nullptr
 #define DEFAULT_PROP_SEED 0
 #define DEFAULT_PROP_IS_LIVE FALSE
 
@@ -149,7 +142,7 @@ struct Settings {
   int family = DEFAULT_PROP_FAMILY;
   std::string ids_text;
   /* Refused values (lftag::gst::refuse_value), until a good value clears them. */
-  std::string ids_error, cx_error, cy_error;
+  std::string ids_error;
   std::vector<TagId> ids;
   guint count = DEFAULT_PROP_COUNT;
   double tag_size = DEFAULT_PROP_TAG_SIZE;
@@ -158,8 +151,7 @@ struct Settings {
   double noise = DEFAULT_PROP_NOISE;
   GstLFTagTestSrcBackground background = DEFAULT_PROP_BACKGROUND;
   std::string background_location;
-  lftag::gst::PinholeSettings pinhole; /* empty: not set; no distortion */
-  std::string calibration_file;
+  lftag::gst::CameraSettings camera; /* no distortion: the scenes are drawn without a lens */
   guint seed = DEFAULT_PROP_SEED;
 };
 
@@ -311,39 +303,14 @@ static void gst_lftag_test_src_class_init(GstLFTagTestSrcClass* klass) {
                                                       "Image file (any format OpenCV reads) behind the markers when "
                                                       "background=photo, scaled to cover the frame",
                                                       DEFAULT_PROP_BACKGROUND_LOCATION, ready));
-  g_object_class_install_property(
-      gobject_class, PROP_FX,
-      g_param_spec_double("fx", "Focal length x",
-                          "Horizontal focal length in pixels. 0 (the default) is \"not set\": the "
-                          "default camera, fx = fy = frame width, a 53 degree field of view, centred",
-                          0.0, lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, ready));
-  g_object_class_install_property(
-      gobject_class, PROP_FY,
-      g_param_spec_double("fy", "Focal length y",
-                          "Vertical focal length in pixels, with fx. 0 (the default) is \"not set\": equal to fx", 0.0,
-                          lftag::gst::kMaxProperty, DEFAULT_PROP_FOCAL, ready));
-  g_object_class_install_property(
-      gobject_class, PROP_CX,
-      g_param_spec_double("cx", "Principal point x",
-                          "Principal point x in pixels, with fx: 0 to 1e6, pixel centres at integers "
-                          "(0 is the left pixel column). -1 (the default) is \"not set\": the frame centre; "
-                          "values between -1 and 0 are refused",
-                          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL, ready));
-  g_object_class_install_property(
-      gobject_class, PROP_CY,
-      g_param_spec_double("cy", "Principal point y",
-                          "Principal point y in pixels, with fx: 0 to 1e6, pixel centres at integers "
-                          "(0 is the top pixel row). -1 (the default) is \"not set\": the frame centre; "
-                          "values between -1 and 0 are refused",
-                          lftag::gst::kUnsetPrincipal, lftag::gst::kMaxProperty, DEFAULT_PROP_PRINCIPAL, ready));
-  g_object_class_install_property(
-      gobject_class, PROP_CALIBRATION_FILE,
-      g_param_spec_string("calibration-file", "Calibration file",
-                          "OpenCV camera calibration (YAML, XML or JSON with camera_matrix and "
-                          "distortion_coefficients, or cameraMatrix and distCoeffs) used instead of "
-                          "fx, fy, cx, cy; scaled to the frame when it records image_width and "
-                          "image_height, which are then the default frame size",
-                          DEFAULT_PROP_CALIBRATION_FILE, ready));
+  lftag::gst::install_camera_properties(
+      gobject_class, PROP_CAMERA, ready,
+      {"Horizontal focal length in pixels. 0 (the default) is \"not set\": the default camera, fx = fy = frame "
+       "width, a 53 degree field of view, centred",
+       "OpenCV camera calibration (YAML, XML or JSON with camera_matrix and distortion_coefficients, or "
+       "cameraMatrix and distCoeffs) used instead of fx, fy, cx, cy; scaled to the frame when it records "
+       "image_width and image_height, which are then the default frame size"},
+      false);
   g_object_class_install_property(
       gobject_class, PROP_SEED,
       g_param_spec_uint("seed", "Seed",
@@ -401,6 +368,11 @@ static void gst_lftag_test_src_set_property(GObject* object, guint prop_id, cons
   std::vector<TagId> ids;
 
   if (!lftag::gst::property_settable_now(GST_ELEMENT(self), pspec)) return;
+  if (prop_id >= PROP_CAMERA && prop_id < PROP_SEED) {
+    lftag::gst::set_camera_property(GST_ELEMENT(self), self->settings->camera,
+                                    lftag::gst::CameraProperty(prop_id - PROP_CAMERA), value);
+    return;
+  }
   switch (prop_id) {
     case PROP_IS_LIVE: /* takes the object lock itself */
       gst_base_src_set_live(GST_BASE_SRC(self), g_value_get_boolean(value));
@@ -418,19 +390,6 @@ static void gst_lftag_test_src_set_property(GObject* object, guint prop_id, cons
         return;
       }
       break;
-    case PROP_CX:
-    case PROP_CY: {
-      /* Between -1 ("not set") and 0: neither, so refused as text is. */
-      const std::string refusal =
-          lftag::gst::refuse_principal(GST_ELEMENT(self), pspec->name, g_value_get_double(value));
-      if (!refusal.empty()) {
-        GST_OBJECT_LOCK(self);
-        (prop_id == PROP_CX ? self->settings->cx_error : self->settings->cy_error) = refusal;
-        GST_OBJECT_UNLOCK(self);
-        return;
-      }
-      break;
-    }
     default: break;
   }
 
@@ -452,17 +411,6 @@ static void gst_lftag_test_src_set_property(GObject* object, guint prop_id, cons
     case PROP_BACKGROUND_LOCATION:
       s.background_location = g_value_get_string(value) ? g_value_get_string(value) : "";
       break;
-    case PROP_FX: s.pinhole.fx = lftag::gst::focal_from_property(g_value_get_double(value)); break;
-    case PROP_FY: s.pinhole.fy = lftag::gst::focal_from_property(g_value_get_double(value)); break;
-    case PROP_CX:
-      s.cx_error.clear();
-      s.pinhole.cx = lftag::gst::principal_from_property(g_value_get_double(value));
-      break;
-    case PROP_CY:
-      s.cy_error.clear();
-      s.pinhole.cy = lftag::gst::principal_from_property(g_value_get_double(value));
-      break;
-    case PROP_CALIBRATION_FILE: s.calibration_file = g_value_get_string(value) ? g_value_get_string(value) : ""; break;
     case PROP_SEED: s.seed = g_value_get_uint(value); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
@@ -480,6 +428,11 @@ static void gst_lftag_test_src_get_property(GObject* object, guint prop_id, GVal
 
   GST_OBJECT_LOCK(self);
   const Settings& s = *self->settings;
+  if (prop_id >= PROP_CAMERA && prop_id < PROP_SEED) {
+    lftag::gst::get_camera_property(s.camera, lftag::gst::CameraProperty(prop_id - PROP_CAMERA), value);
+    GST_OBJECT_UNLOCK(self);
+    return;
+  }
   switch (prop_id) {
     case PROP_FAMILY: g_value_set_enum(value, s.family); break;
     case PROP_IDS: g_value_set_string(value, optional_string(s.ids_text)); break;
@@ -490,11 +443,6 @@ static void gst_lftag_test_src_get_property(GObject* object, guint prop_id, GVal
     case PROP_NOISE: g_value_set_double(value, s.noise); break;
     case PROP_BACKGROUND: g_value_set_enum(value, s.background); break;
     case PROP_BACKGROUND_LOCATION: g_value_set_string(value, optional_string(s.background_location)); break;
-    case PROP_FX: g_value_set_double(value, lftag::gst::focal_to_property(s.pinhole.fx)); break;
-    case PROP_FY: g_value_set_double(value, lftag::gst::focal_to_property(s.pinhole.fy)); break;
-    case PROP_CX: g_value_set_double(value, lftag::gst::principal_to_property(s.pinhole.cx)); break;
-    case PROP_CY: g_value_set_double(value, lftag::gst::principal_to_property(s.pinhole.cy)); break;
-    case PROP_CALIBRATION_FILE: g_value_set_string(value, optional_string(s.calibration_file)); break;
     case PROP_SEED: g_value_set_uint(value, s.seed); break;
     default: G_OBJECT_WARN_INVALID_PROPERTY_ID(object, prop_id, pspec); break;
   }
@@ -514,7 +462,8 @@ static gboolean gst_lftag_test_src_start(GstBaseSrc* bsrc) {
   const Settings s = gst_lftag_test_src_settings(self);
   State& st = *self->state;
 
-  if (!lftag::gst::no_refused_values(GST_ELEMENT(self), {&s.ids_error, &s.cx_error, &s.cy_error})) return FALSE;
+  if (!lftag::gst::no_refused_values(GST_ELEMENT(self), {&s.ids_error, &s.camera.cx_error, &s.camera.cy_error}))
+    return FALSE;
   try {
     resolve_ids(s);
   } catch (const std::exception& e) {
@@ -523,10 +472,10 @@ static gboolean gst_lftag_test_src_start(GstBaseSrc* bsrc) {
   }
 
   st.calibration.reset();
-  if (!s.calibration_file.empty() &&
-      !lftag::gst::load_calibration(GST_ELEMENT(self), s.calibration_file, st.calibration))
+  if (!s.camera.calibration_file.empty() &&
+      !lftag::gst::load_calibration(GST_ELEMENT(self), s.camera.calibration_file, st.calibration))
     return FALSE;
-  const std::string ignored = lftag::gst::ignored_pinhole(s.pinhole, st.calibration.has_value());
+  const std::string ignored = lftag::gst::ignored_pinhole(s.camera.pinhole, st.calibration.has_value());
   if (!ignored.empty()) GST_ELEMENT_WARNING(self, RESOURCE, SETTINGS, ("%s.", ignored.c_str()), (nullptr));
 
   st.photo.release();
@@ -605,7 +554,7 @@ static gboolean gst_lftag_test_src_set_caps(GstBaseSrc* bsrc, GstCaps* caps) {
   /* One renderer per camera: it keeps the per-pixel rays and the background. */
   try {
     lftag::SceneParams params;
-    params.camera = lftag::gst::frame_camera(s.pinhole, st.calibration, width, height);
+    params.camera = lftag::gst::frame_camera(s.camera.pinhole, st.calibration, width, height);
     params.noise_sigma = s.noise;
     if (s.background == GST_LFTAG_TEST_SRC_BACKGROUND_GRADIENT) {
       params.exposure = 0.8; /* keeps the bright side below white */

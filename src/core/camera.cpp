@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
+#include <tuple>
 
 #include <opencv2/calib3d.hpp>
 
@@ -50,6 +51,23 @@ Camera Camera::pinhole(double fx, double fy, double cx, double cy, int width, in
   cam.width = width, cam.height = height;
   cam.calibrated = true;
   return cam;
+}
+
+bool operator==(const Camera& a, const Camera& b) {
+  return std::tie(a.fx, a.fy, a.cx, a.cy, a.width, a.height, a.distortion, a.calibrated) ==
+         std::tie(b.fx, b.fy, b.cx, b.cy, b.width, b.height, b.distortion, b.calibrated);
+}
+
+std::optional<Camera> PinholeSettings::camera_for(int width, int height) const {
+  if (!fx) return std::nullopt;
+  Camera camera = Camera::pinhole(*fx, fy.value_or(*fx), cx.value_or((width - 1) / 2.0),
+                                  cy.value_or((height - 1) / 2.0), width, height);
+  camera.distortion = distortion;
+  return camera;
+}
+
+bool operator==(const PinholeSettings& a, const PinholeSettings& b) {
+  return std::tie(a.fx, a.fy, a.cx, a.cy, a.distortion) == std::tie(b.fx, b.fy, b.cx, b.cy, b.distortion);
 }
 
 Camera Camera::load(const std::string& path) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <tuple>
 
 #include <time.h>
 
@@ -68,6 +69,18 @@ void DetectorParams::validate() const {
   if (!(shape_choice_ratio >= 0)) fail("the shape choice ratio must be at least 0 (0: by the centroids alone)");
   if (camera) camera->validate();
 }
+
+namespace {
+auto fields(const DetectorParams& p) {
+  return std::tie(p.families, p.threshold_window, p.threshold_offset, p.second_look, p.max_second_looks,
+                  p.max_candidates, p.deadline_ms, p.min_child_fraction, p.max_child_ratio, p.max_extra_children,
+                  p.dilation, p.centroid_reference, p.max_ink_ratio, p.min_spread_ratio, p.max_decode_error,
+                  p.max_cell_residual, p.min_pixels_per_unit, p.min_decode_margin, p.min_noise_margin,
+                  p.max_ink_spread, p.camera, p.tag_size, p.refine_pose, p.shape_choice_ratio);
+}
+}  // namespace
+
+bool operator==(const DetectorParams& a, const DetectorParams& b) { return fields(a) == fields(b); }
 
 double DetectionStats::total_ms() const {
   return threshold_ms + regions_ms + candidates_ms + keypoints_ms + hypotheses_ms + decode_ms + pose_ms +

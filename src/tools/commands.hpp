@@ -10,6 +10,7 @@
 #include <CLI/CLI.hpp>
 
 #include "lftag/detector.hpp"
+#include "tunables.hpp"
 
 namespace lftag::tools {
 
@@ -30,21 +31,17 @@ inline CLI::Validator finite_in(double lo, double hi) {
 // option not given is empty (never a number standing for "not given": --cx 0 is 0).
 struct DetectorOptions {
   std::string families = "3x3,4x4", calibration;
-  std::optional<double> fx, fy, cx, cy;
+  PinholeSettings pinhole;  // --fx, --fy, --cx, --cy (no distortion: it comes with --calibration)
   double tag_size = 0.1;
-  int window = 16, offset = 4;
-  int max_candidates = DetectorParams{}.max_candidates;
-  double deadline_ms = kLiveDeadlineMs;
+  // The tunables (io/tunables.hpp), one option each, as lftagdetect's properties.
+  DetectorParams params = io::front_end_defaults();
 };
-// Adds --family, --fx, --fy, --cx, --cy, --calibration, --tag-size, --threshold-window,
-// --threshold-offset, --max-candidates and --deadline to `cmd`, stored in `options` (which must outlive
-// the parse).
+// Adds --family, --fx, --fy, --cx, --cy, --calibration, --tag-size and one option per
+// tunable (--threshold-window, --max-candidates, --deadline, ...) to `cmd`, stored in
+// `options` (which must outlive the parse).
 void add_detector_options(CLI::App* cmd, DetectorOptions& options);
 // Throws std::invalid_argument when --fy, --cx or --cy is given without --fx.
 void check_camera_options(const DetectorOptions& options);
-// The camera --fx, --fy, --cx and --cy give for a width x height image (fy defaults to fx,
-// the principal point to the image centre); empty without --fx.
-std::optional<Camera> hand_camera(const DetectorOptions& options, int width, int height);
 
 void add_generate_command(CLI::App& app, int& status);
 void add_render_command(CLI::App& app, int& status);

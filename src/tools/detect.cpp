@@ -76,41 +76,48 @@ nlohmann::json outline_json(const OutlineVerdict& v) {
 
 void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
   cmd->add_option("--family", o.families, "Families to detect, comma-separated (default 3x3,4x4)");
-  cmd->add_option("--fx", o.fx, "Focal length in pixels (x)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
-  cmd->add_option("--fy", o.fy, "Focal length in pixels (y; default fx)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
-  cmd->add_option("--cx", o.cx, "Principal point x (default: image centre)")->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
-  cmd->add_option("--cy", o.cy, "Principal point y (default: image centre)")->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
+  PinholeSettings& pin = o.pinhole;
+  cmd->add_option("--fx", pin.fx, "Focal length in pixels (x)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
+  cmd->add_option("--fy", pin.fy, "Focal length in pixels (y; default fx)")
+      ->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
+  cmd->add_option("--cx", pin.cx, "Principal point x (default: image centre)")
+      ->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
+  cmd->add_option("--cy", pin.cy, "Principal point y (default: image centre)")
+      ->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
   cmd->add_option("--calibration", o.calibration,
                   "OpenCV calibration file (YAML/XML/JSON: camera_matrix + distortion_coefficients, or "
                   "cameraMatrix + distCoeffs). Without a camera, poses assume fx = image width and are "
                   "marked \"calibrated\": false");
   cmd->add_option("--tag-size", o.tag_size, "Outer edge of the black border in metres (default 0.1)")
       ->check(finite_in(1e-6, 1e3));
-  cmd->add_option("--threshold-window", o.window, "Side of the mean window for binarisation (default 16)")
-      ->check(CLI::Range(2, 1024));
-  cmd->add_option("--threshold-offset", o.offset, "Grey levels below the mean for black (default 4)")
-      ->check(CLI::Range(0, 255));
-  cmd->add_option("--max-candidates", o.max_candidates,
-                  "Candidates examined per image at most, the most plausible first; the rest are skipped and "
-                  "counted (--stats: skipped_by_budget). 0: no limit (default " +
-                      std::to_string(DetectorParams{}.max_candidates) + ")")
-      ->check(CLI::Range(0, 1 << 30));
-  cmd->add_option("--deadline", o.deadline_ms,
-                  "Milliseconds of processor time an image may take: past them its optional work (second looks at far "
-                  "or blurred markers, their outline reads) is skipped and counted (--stats: skipped_by_deadline); "
-                  "its own candidates are always examined. 0: none "
-                  "(default " + CLI::detail::to_string(kLiveDeadlineMs) + ")")
-      ->check(finite_in(0, 1e7));
+  for (const io::Tunable& t : io::tunables()) {
+    const std::string name = std::string("--") + t.name;
+    const double initial = t.get(o.params);
+    DetectorParams* params = &o.params;
+    const io::Tunable* row = &t;
+    CLI::Option* option = nullptr;
+    switch (t.kind) {
+      case io::Tunable::Kind::integer:
+        option = cmd->add_option_function<int>(name, [params, row](int v) { row->set(*params, v); }, t.blurb)
+                     ->check(CLI::Range(int(t.min), int(t.max)));
+        option->default_str(std::to_string(int(initial)));
+        break;
+      case io::Tunable::Kind::real:
+        option = cmd->add_option_function<double>(name, [params, row](double v) { row->set(*params, v); }, t.blurb)
+                     ->check(finite_in(t.min, t.max));
+        option->default_str(CLI::detail::to_string(initial));
+        break;
+      case io::Tunable::Kind::boolean:
+        option = cmd->add_option_function<bool>(name, [params, row](bool v) { row->set(*params, v); }, t.blurb);
+        option->default_str(initial != 0 ? "true" : "false");
+        break;
+    }
+  }
 }
 
 void check_camera_options(const DetectorOptions& o) {
-  if (!o.fx && (o.fy || o.cx || o.cy)) throw std::invalid_argument("--fy, --cx and --cy need --fx");
-}
-
-std::optional<Camera> hand_camera(const DetectorOptions& o, int width, int height) {
-  if (!o.fx) return std::nullopt;
-  return Camera::pinhole(*o.fx, o.fy.value_or(*o.fx), o.cx.value_or((width - 1) / 2.0),
-                         o.cy.value_or((height - 1) / 2.0));
+  const PinholeSettings& pin = o.pinhole;
+  if (!pin.fx && (pin.fy || pin.cx || pin.cy)) throw std::invalid_argument("--fy, --cx and --cy need --fx");
 }
 
 void add_detect_command(CLI::App& app, int& status) {
@@ -133,14 +140,10 @@ void add_detect_command(CLI::App& app, int& status) {
   cmd->add_option("--debug-dir", opt->debug_dir,
                   "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
   cmd->callback([opt, &status] {
-    DetectorParams base;
+    DetectorParams base = opt->params;
     try {
       base.families = Family::parse_list(opt->families);
       base.tag_size = opt->tag_size;
-      base.threshold_window = opt->window;
-      base.threshold_offset = opt->offset;
-      base.max_candidates = opt->max_candidates;
-      base.deadline_ms = opt->deadline_ms;
       check_camera_options(*opt);
       if (!opt->calibration.empty()) base.camera = Camera::load(opt->calibration);
       if (!opt->debug_dir.empty()) std::filesystem::create_directories(opt->debug_dir);
@@ -164,7 +167,7 @@ void add_detect_command(CLI::App& app, int& status) {
         auto it = detectors.find({grey.cols, grey.rows});
         if (it == detectors.end()) {
           DetectorParams p = base;
-          if (!p.camera) p.camera = hand_camera(*opt, grey.cols, grey.rows);
+          if (!p.camera) p.camera = opt->pinhole.camera_for(grey.cols, grey.rows);
           it = detectors.emplace(std::make_pair(grey.cols, grey.rows), Detector(p)).first;
         }
         DetectionStats stats;

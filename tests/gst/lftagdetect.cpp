@@ -22,6 +22,7 @@
 
 #include "detectmessages.h"
 #include "metaconversion.h"
+#include "tunables.hpp"
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
 #include "frames.hpp"
@@ -988,6 +989,53 @@ GST_END_TEST;
 
 // ---------------------------------------------------------------------------
 // Properties
+
+// The detector's tunables are properties from one table (src/io/tunables.hpp), as the
+// command line's options are: each with the table's type, range and default (the
+// library's, with the live deadline), and each value set is read back.
+GST_START_TEST(test_tunable_properties) {
+  GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
+  fail_unless(e != nullptr);
+  const lftag::DetectorParams defaults = lftag::io::front_end_defaults();
+  fail_unless_equals_float(defaults.deadline_ms, lftag::kLiveDeadlineMs);
+  for (const lftag::io::Tunable& t : lftag::io::tunables()) {
+    GParamSpec* spec = g_object_class_find_property(G_OBJECT_GET_CLASS(e), t.name);
+    fail_unless(spec != nullptr, "no property %s", t.name);
+    fail_unless(spec->flags & GST_PARAM_MUTABLE_PLAYING, "%s is not mutable while playing", t.name);
+    const double changed = t.get(defaults) == t.max ? t.min : t.max;
+    GValue value = G_VALUE_INIT;
+    g_value_init(&value, spec->value_type);
+    switch (t.kind) {
+      case lftag::io::Tunable::Kind::integer: {
+        const GParamSpecInt* range = G_PARAM_SPEC_INT(spec);
+        fail_unless(range->minimum == t.min && range->maximum == t.max && range->default_value == t.get(defaults),
+                    "%s", t.name);
+        g_object_set(e, t.name, gint(changed), nullptr);
+        g_object_get_property(G_OBJECT(e), t.name, &value);
+        fail_unless_equals_int(g_value_get_int(&value), gint(changed));
+        break;
+      }
+      case lftag::io::Tunable::Kind::real: {
+        const GParamSpecDouble* range = G_PARAM_SPEC_DOUBLE(spec);
+        fail_unless(range->minimum == t.min && range->maximum == t.max && range->default_value == t.get(defaults),
+                    "%s", t.name);
+        g_object_set(e, t.name, changed, nullptr);
+        g_object_get_property(G_OBJECT(e), t.name, &value);
+        fail_unless_equals_float(g_value_get_double(&value), changed);
+        break;
+      }
+      case lftag::io::Tunable::Kind::boolean:
+        fail_unless(G_PARAM_SPEC_BOOLEAN(spec)->default_value == (t.get(defaults) != 0), "%s", t.name);
+        g_object_set(e, t.name, gboolean(t.get(defaults) == 0), nullptr);
+        g_object_get_property(G_OBJECT(e), t.name, &value);
+        fail_unless(g_value_get_boolean(&value) == (t.get(defaults) == 0), "%s", t.name);
+        break;
+    }
+    g_value_unset(&value);
+  }
+  gst_object_unref(e);
+}
+GST_END_TEST;
 
 GST_START_TEST(test_properties) {
   GstElement* e = gst_element_factory_make("lftagdetect", nullptr);
@@ -2044,6 +2092,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_message_switch_and_empty_frames);
   tcase_add_test(tc, test_message_times_after_seek);
   tcase_add_test(tc, test_properties);
+  tcase_add_test(tc, test_tunable_properties);
   tcase_add_test(tc, test_bad_families);
   tcase_add_test(tc, test_changes_while_playing);
   tcase_add_test(tc, test_changes_from_another_thread);

@@ -56,6 +56,43 @@ std::string json_with(const std::string& entries) {
 
 }  // namespace
 
+// The hand-set camera: fy defaults to fx, the principal point to the frame's centre, a
+// principal point of 0 is 0, and without fx there is none.
+TEST(Camera, PinholeSettingsFillWhatIsNotSet) {
+  lftag::PinholeSettings pin;
+  EXPECT_FALSE(pin.camera_for(640, 480));
+  pin.fy = 500;
+  pin.cx = 10;
+  EXPECT_FALSE(pin.camera_for(640, 480)) << "fy and cx without fx";
+  pin = {};
+  pin.fx = 600;
+  auto camera = pin.camera_for(640, 480);
+  ASSERT_TRUE(camera);
+  EXPECT_EQ(camera->fx, 600);
+  EXPECT_EQ(camera->fy, 600);
+  EXPECT_EQ(camera->cx, 319.5);
+  EXPECT_EQ(camera->cy, 239.5);
+  EXPECT_EQ(camera->width, 640);
+  EXPECT_TRUE(camera->calibrated);
+  EXPECT_FALSE(camera->has_distortion());
+  pin.fy = 610;
+  pin.cy = 0;
+  pin.distortion = {-0.1, 0.01, 0, 0};
+  camera = pin.camera_for(640, 480);
+  ASSERT_TRUE(camera);
+  EXPECT_EQ(camera->fy, 610);
+  EXPECT_EQ(camera->cx, 319.5);
+  EXPECT_EQ(camera->cy, 0);
+  EXPECT_EQ(camera->distortion, pin.distortion);
+  EXPECT_NO_THROW(camera->validate());
+  lftag::PinholeSettings other = pin;
+  EXPECT_EQ(other, pin);
+  other.cy.reset();
+  EXPECT_NE(other, pin);
+  EXPECT_NE(*other.camera_for(640, 480), *camera);
+  EXPECT_EQ(*pin.camera_for(640, 480), *camera);
+}
+
 TEST(Camera, LoadsOpenCvSampleCalibration) {
   const Camera c = Camera::load(kData + "/opencv_sample.yml");
   EXPECT_TRUE(c.calibrated);

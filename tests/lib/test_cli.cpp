@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "detection_json.hpp"  // src/io: the JSON of one detection, shared by every output
+#include "tunables.hpp"        // src/io: the detector options' table
 
 namespace {
 
@@ -410,6 +411,43 @@ TEST(Cli, HelpDocumentsTheOptions) {
   for (const char* opt : {"--family", "--fx", "--calibration", "--tag-size", "--stats", "--debug-dir"})
     EXPECT_NE(detect.output.find(opt), std::string::npos) << opt;
   EXPECT_NE(run("").status, 0);
+}
+
+// One row per tunable reaches one field of DetectorParams: set to its other bound, the
+// parameters differ from the defaults and read it back.
+TEST(Cli, EachTunableReachesTheDetectorsParameters) {
+  const lftag::DetectorParams defaults = lftag::io::front_end_defaults();
+  for (const lftag::io::Tunable& t : lftag::io::tunables()) {
+    lftag::DetectorParams p = defaults;
+    const double other = t.get(defaults) == t.max ? t.min : t.max;
+    t.set(p, other);
+    EXPECT_EQ(t.get(p), other) << t.name;
+    EXPECT_NE(p, defaults) << t.name;
+    EXPECT_NO_THROW(p.validate()) << t.name << " at " << other;
+  }
+}
+
+TEST(Cli, DetectTakesEveryTunableAsAnOption) {
+  const std::string image = kTmp + "/tunables.png";
+  ASSERT_EQ(run("render --family 3x3 --id 5 --distance 3 --output " + image).status, 0);
+  const CliResult help = run("detect --help");
+  for (const lftag::io::Tunable& t : lftag::io::tunables())
+    EXPECT_NE(help.output.find(std::string("--") + t.name), std::string::npos) << t.name;
+  // Options read as the element's properties are: the marker is read with any of them.
+  CliResult r = run("detect --family 3x3 --second-look false --max-ink-ratio 3 --max-decode-error 0.001 "
+                    "--max-cell-residual 0.4 --min-spread-ratio 0.2 --deadline 0 " + image);
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto lines = json_lines(r.output);
+  ASSERT_EQ(lines.size(), 1u) << r.output;
+  ASSERT_EQ(lines[0]["detections"].size(), 1u) << r.output;
+  EXPECT_EQ(lines[0]["detections"][0]["id"], 5);
+  // Out of the table's range, or not of its type: an option error naming the option.
+  for (const char* bad : {"--max-ink-ratio 0.5", "--min-spread-ratio 2", "--second-look maybe", "--max-candidates 1.5",
+                          "--deadline nan"}) {
+    r = run(std::string("detect ") + bad + " " + image);
+    EXPECT_EQ(r.status, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find(std::string(bad).substr(0, std::string(bad).find(' '))), std::string::npos) << r.output;
+  }
 }
 
 TEST(Cli, TheJsonOfAPoseCarriesItsOtherSolutionOrNull) {

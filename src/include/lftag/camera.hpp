@@ -2,6 +2,7 @@
 // OpenCV pinhole camera with (k1, k2, p1, p2[, k3[, k4, k5, k6]]) distortion.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -61,6 +62,24 @@ struct Camera {
   // outside [0, kMaxImageSide], a distortion of other than 0, 4, 5 or 8 coefficients or
   // one beyond +-kMaxDistortion; NaN and infinities everywhere.
   void validate() const;
+
+  friend bool operator==(const Camera& a, const Camera& b);
+  friend bool operator!=(const Camera& a, const Camera& b) { return !(a == b); }
+};
+
+// A camera set by hand, any part of it left unset: the command line's --fx, --fy, --cx and
+// --cy, the elements' fx, fy, cx, cy and distortion.
+struct PinholeSettings {
+  std::optional<double> fx, fy, cx, cy;
+  std::vector<double> distortion;
+
+  // The camera of a width x height frame: fy defaults to fx, the principal point to the
+  // frame's centre ((width - 1) / 2, pixel centres at integers). Empty without fx, which
+  // the others need.
+  std::optional<Camera> camera_for(int width, int height) const;
+
+  friend bool operator==(const PinholeSettings& a, const PinholeSettings& b);
+  friend bool operator!=(const PinholeSettings& a, const PinholeSettings& b) { return !(a == b); }
 };
 
 }  // namespace lftag

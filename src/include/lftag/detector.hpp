@@ -170,6 +170,10 @@ struct DetectorParams {
   double decode_threshold(const Family& family) const;
   // Throws std::invalid_argument naming the first parameter out of range.
   void validate() const;
+
+  // Every field (a new field must join the comparison in detector.cpp).
+  friend bool operator==(const DetectorParams& a, const DetectorParams& b);
+  friend bool operator!=(const DetectorParams& a, const DetectorParams& b) { return !(a == b); }
 };
 
 // The deadline of the element and the command line (DetectorParams::deadline_ms): a 720p

@@ -404,25 +404,30 @@ void Annotator::build() {
   gst_object_unref(decoded);
 
   // The detector, as `lftag detect` would be set up.
-  const bool camera = !o_.calibration.empty() || o_.fx.has_value();
+  const PinholeSettings& pin = o_.pinhole;
+  const bool camera = !o_.calibration.empty() || pin.fx.has_value();
   std::string overlay = o_.overlay.empty() ? (camera ? "outline+id+axes" : "outline+id") : overlay_flags(o_.overlay);
   if (o_.output.empty()) overlay.clear();  // nothing is drawn that nobody sees
   set(detect, "families", o_.families);
   set(detect, "messages", "none");
   set(detect, "overlay", overlay.empty() ? "0" : overlay);
-  set(detect, "threshold-window", std::to_string(o_.window));
-  set(detect, "threshold-offset", std::to_string(o_.offset));
-  set(detect, "max-candidates", std::to_string(o_.max_candidates));
-  g_object_set(detect, "deadline", o_.deadline_ms, nullptr);
+  for (const io::Tunable& t : io::tunables()) {
+    const double value = t.get(o_.params);
+    switch (t.kind) {
+      case io::Tunable::Kind::integer: g_object_set(detect, t.name, gint(value), nullptr); break;
+      case io::Tunable::Kind::real: g_object_set(detect, t.name, value, nullptr); break;
+      case io::Tunable::Kind::boolean: g_object_set(detect, t.name, gboolean(value != 0), nullptr); break;
+    }
+  }
   if (o_.tracking)
     g_object_set(detect, "tracking", TRUE, "lost-after", o_.lost_after, "smoothing", gboolean(o_.smoothing),
                  "full-detection-interval", guint(o_.full_detection_interval), nullptr);
   if (!o_.calibration.empty()) g_object_set(detect, "calibration-file", o_.calibration.c_str(), nullptr);
   // Only the options given: the element's own "not set" (0 for fx and fy, -1 for cx and
   // cy) never stands for a value.
-  if (o_.fx) g_object_set(detect, "fx", *o_.fx, "fy", o_.fy.value_or(*o_.fx), nullptr);
-  if (o_.cx) g_object_set(detect, "cx", *o_.cx, nullptr);
-  if (o_.cy) g_object_set(detect, "cy", *o_.cy, nullptr);
+  if (pin.fx) g_object_set(detect, "fx", *pin.fx, "fy", pin.fy.value_or(*pin.fx), nullptr);
+  if (pin.cx) g_object_set(detect, "cx", *pin.cx, nullptr);
+  if (pin.cy) g_object_set(detect, "cy", *pin.cy, nullptr);
   if (tag_size_given_) g_object_set(detect, "tag-size", o_.tag_size, nullptr);
 
   GstPad* pad = gst_element_get_static_pad(detect, "src");
@@ -972,8 +977,9 @@ void add_annotate_command(CLI::App& app, int& status) {
       check_camera_options(o);
       // lftagdetect's ranges, narrower than the still-image tool's.
       using Range = std::tuple<const char*, std::optional<double>, double, double>;
-      for (const auto& [name, value, lo, hi] : {Range{"--fx", o.fx, 1e-3, 1e6}, Range{"--fy", o.fy, 1e-3, 1e6},
-                                                  Range{"--cx", o.cx, 0.0, 1e6}, Range{"--cy", o.cy, 0.0, 1e6},
+      for (const auto& [name, value, lo, hi] : {Range{"--fx", o.pinhole.fx, 1e-3, 1e6}, Range{"--fy", o.pinhole.fy, 1e-3, 1e6},
+                                                  Range{"--cx", o.pinhole.cx, 0.0, 1e6},
+                                                  Range{"--cy", o.pinhole.cy, 0.0, 1e6},
                                                   Range{"--tag-size", o.tag_size, 1e-3, 100.0}})
         if (value && (*value < lo || *value > hi))
           throw std::invalid_argument(std::string(name) + " must be from " + CLI::detail::to_string(lo) + " to " +
