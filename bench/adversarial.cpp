@@ -49,7 +49,7 @@ struct Variant {
   double pitch_px = 0;               // grid and fields: tile pitch at the plane's centre
   double tilt_deg = 0, pan_deg = 0;  // of the plane
   Kind kind = Kind::grid;
-  double defocus_px = 0;             // Gaussian blur of the whole frame (sigma)
+  double defocus_px = 0;  // Gaussian blur of the whole frame (sigma)
 };
 
 const std::vector<Variant> kVariants{
@@ -99,8 +99,8 @@ constexpr Plan kFull{3, 7}, kQuick{1, 1};
 // The quick mode: the ordinary frame, two walls and a field of look-alikes, with the
 // element's set-ups only.
 bool in_quick(const std::string& name) {
-  return name == "ordinary" || name == "white-4-10px" || name == "white-9-16px" || name == "lookalikes-60px" || name == "low-light-video" ||
-         name == "all" || name == "default";
+  return name == "ordinary" || name == "white-4-10px" || name == "white-9-16px" || name == "lookalikes-60px" ||
+         name == "low-light-video" || name == "all" || name == "default";
 }
 
 struct Truth {
@@ -149,8 +149,8 @@ cv::Mat1f marker_cells(const lftag::Family& family, std::mt19937_64& rng, bool l
   }
   for (const lftag::UnitRect& r : family.black_squares(id)) {
     const int dx = int(rng() % 3) - 1, dy = int(rng() % 3) - 1, grow = int(rng() % 3) - 1;
-    const cv::Rect moved(int(2 * r.x) + dx - (grow > 0), int(2 * r.y) + dy - (grow > 0),
-                         int(2 * r.width) + 2 * grow, int(2 * r.height) + 2 * grow);
+    const cv::Rect moved(int(2 * r.x) + dx - (grow > 0), int(2 * r.y) + dy - (grow > 0), int(2 * r.width) + 2 * grow,
+                         int(2 * r.height) + 2 * grow);
     inside(moved & cv::Rect(4, 4, bits.cols - 8, bits.rows - 8)).setTo(ink);
   }
   return cells;
@@ -187,7 +187,8 @@ cv::Mat1f field_albedo(const Variant& v, cv::Size cells, int tile, std::mt19937_
   cv::Mat1f albedo(cells, 0.88f);
   for (int y = 0; y + tile <= cells.height; y += tile)
     for (int x = 0; x + tile <= cells.width; x += tile) {
-      const cv::Mat1f m = v.kind == Kind::torn ? torn_cells(rng) : marker_cells(lftag::Family(3 + int(rng() % 6)), rng, true);
+      const cv::Mat1f m =
+          v.kind == Kind::torn ? torn_cells(rng) : marker_cells(lftag::Family(3 + int(rng() % 6)), rng, true);
       const cv::Rect at(x + (tile - m.cols) / 2, y + (tile - m.rows) / 2, m.cols, m.rows);
       m.copyTo(albedo(at));
     }
@@ -303,14 +304,39 @@ bool run_adversarial(const Options& options) {
   std::map<std::string, std::vector<Frame>> frames;
   for (const Variant& v : variants) {
     progress("adversarial: rendering " + v.name);
-    for (int f = 0; f < plan.frames; ++f) frames[v.name].push_back(make_frame(v, photos, video_sources, videos, f, options.seed));
+    for (int f = 0; f < plan.frames; ++f)
+      frames[v.name].push_back(make_frame(v, photos, video_sources, videos, f, options.seed));
   }
 
-  Csv csv(options.out / "adversarial.csv",
-          {"config", "families", "budget", "variant", "frames", "runs", "median_ms", "q1_ms", "q3_ms", "ratio",
-           "candidates", "examined", "skipped_by_budget", "second_looks", "second_looks_skipped",
-           "markers", "found", "all_found", "wrong", "candidates_ms", "decoding_ms", "second_look_ms", "deadline_ms",
-           "mean_ms", "p99_ms", "max_ms", "outline_reads", "past_deadline", "skipped_by_deadline"});
+  Csv csv(options.out / "adversarial.csv", {"config",
+                                            "families",
+                                            "budget",
+                                            "variant",
+                                            "frames",
+                                            "runs",
+                                            "median_ms",
+                                            "q1_ms",
+                                            "q3_ms",
+                                            "ratio",
+                                            "candidates",
+                                            "examined",
+                                            "skipped_by_budget",
+                                            "second_looks",
+                                            "second_looks_skipped",
+                                            "markers",
+                                            "found",
+                                            "all_found",
+                                            "wrong",
+                                            "candidates_ms",
+                                            "decoding_ms",
+                                            "second_look_ms",
+                                            "deadline_ms",
+                                            "mean_ms",
+                                            "p99_ms",
+                                            "max_ms",
+                                            "outline_reads",
+                                            "past_deadline",
+                                            "skipped_by_deadline"});
   bool first = true;
   for (const Config& config : kConfigs) {
     if (options.quick && !in_quick(config.name)) continue;
@@ -352,8 +378,9 @@ bool run_adversarial(const Options& options) {
         }
 
     const double ordinary = quantile(results["ordinary"].times, 0.5);
-    if (first) std::printf("%-19s %-24s %9s %7s %7s %7s %10s %9s %8s %6s %7s\n", "config", "variant", "median_ms",
-                           "mean_ms", "p99_ms", "max_ms", "candidates", "examined", "skipped", "cut", "found");
+    if (first)
+      std::printf("%-19s %-24s %9s %7s %7s %7s %10s %9s %8s %6s %7s\n", "config", "variant", "median_ms", "mean_ms",
+                  "p99_ms", "max_ms", "candidates", "examined", "skipped", "cut", "found");
     first = false;
     for (const Variant& v : variants) {
       const Result& r = results[v.name];

@@ -16,10 +16,10 @@
 // more than kFlipDeg off is a flip: what makes the z axis jump.
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <memory>
-#include <iterator>
 #include <tuple>
 
 #include <opencv2/imgproc.hpp>
@@ -94,7 +94,7 @@ std::vector<Rule> rules_for(const std::string& name) {
 struct Trial {
   int condition, set, size, tilt, marker;
   std::string id;
-  double edge_px, tilt_deg;  // as placed
+  double edge_px, tilt_deg;       // as placed
   std::vector<Outcome> outcomes;  // per rule
 };
 
@@ -134,29 +134,34 @@ bool run_ambiguity(const Options& options) {
             const std::string& id = ids[std::size_t(set * p.markers + m)];
             const cv::Mat1f linear = renderer.render_linear({design.target(id, kTagSize, pose.rvec, pose.tvec)});
             for (int c = 0; c < kConditionCount; ++c) {
-              Trial trial{c, set, int(a), int(t), m, id, edge_px(renderer.params().camera, pose, kTagSize),
-                          tilt_from_sight_deg(pose), {}};
+              Trial trial{c,
+                          set,
+                          int(a),
+                          int(t),
+                          m,
+                          id,
+                          edge_px(renderer.params().camera, pose, kTagSize),
+                          tilt_from_sight_deg(pose),
+                          {}};
               cv::Mat1f defocused = linear;
               if (kConditions[c].defocus_px > 0)
                 cv::GaussianBlur(linear, defocused, cv::Size(), kConditions[c].defocus_px);
               const cv::Mat1b image = noisy[c].quantize(defocused, rng());
               for (Rule& r : rules)
-                trial.outcomes.push_back(
-                    score(r.system->detect(image), id, pose, kTagSize, renderer.params().camera));
+                trial.outcomes.push_back(score(r.system->detect(image), id, pose, kTagSize, renderer.params().camera));
               trials[s].push_back(std::move(trial));
             }
           }
     progress("ambiguity: " + options.systems[s] + " done");
   });
 
-  Csv trials_csv(options.out / "ambiguity.csv",
-                 {"system", "rule", "condition", "set", "size_px", "tilt_deg", "marker", "id", "edge_px",
-                  "tilt_placed_deg", "found",
-                  "rotation_error_deg", "alternative_rotation_error_deg", "ambiguity_ratio", "wrong_choice"});
-  Csv summary_csv(options.out / "ambiguity_summary.csv",
-                  {"system", "rule", "condition", "set", "size_px", "tilt_deg", "markers", "found", "with_alternative",
-                   "wrong",
-                   "wrong_pct", "flips", "flips_pct", "median_rotation_deg", "p90_rotation_deg", "wrong_ratio_max"});
+  Csv trials_csv(options.out / "ambiguity.csv", {"system", "rule", "condition", "set", "size_px", "tilt_deg", "marker",
+                                                 "id", "edge_px", "tilt_placed_deg", "found", "rotation_error_deg",
+                                                 "alternative_rotation_error_deg", "ambiguity_ratio", "wrong_choice"});
+  Csv summary_csv(
+      options.out / "ambiguity_summary.csv",
+      {"system", "rule", "condition", "set", "size_px", "tilt_deg", "markers", "found", "with_alternative", "wrong",
+       "wrong_pct", "flips", "flips_pct", "median_rotation_deg", "p90_rotation_deg", "wrong_ratio_max"});
   Csv ratios_csv(options.out / "ambiguity_ratios.csv",
                  {"system", "rule", "condition", "set", "ratio_from", "ratio_to", "found", "wrong", "flips"});
   for (int s = 0; s < n; ++s) {
@@ -168,7 +173,7 @@ bool run_ambiguity(const Options& options) {
         double wrong_ratio_max = kNaN;
         std::vector<double> rotation;
       };
-      std::map<std::tuple<int, int, int, int>, Tally> tallies;  // condition, set, size, tilt (-1: all)
+      std::map<std::tuple<int, int, int, int>, Tally> tallies;      // condition, set, size, tilt (-1: all)
       std::map<std::tuple<int, int, std::size_t>, Tally> by_ratio;  // condition, set, ratio bin
       for (const Trial& t : trials[s]) {
         const Outcome& o = t.outcomes[r];
@@ -201,10 +206,10 @@ bool run_ambiguity(const Options& options) {
       for (const auto& [key, y] : tallies) {
         const auto [condition, set, size, tilt] = key;
         summary_csv.row(options.systems[s], rule_names[s][r], kConditions[condition].name, kSets[set],
-                        size < 0 ? kNaN : p.sizes[size],
-                        tilt < 0 ? kNaN : p.tilts[tilt], y.markers, y.found, y.with_alternative, y.wrong,
-                        y.found ? 100.0 * y.wrong / y.found : kNaN, y.flips, y.found ? 100.0 * y.flips / y.found : kNaN,
-                        quantile(y.rotation, 0.5), quantile(y.rotation, 0.9), y.wrong_ratio_max);
+                        size < 0 ? kNaN : p.sizes[size], tilt < 0 ? kNaN : p.tilts[tilt], y.markers, y.found,
+                        y.with_alternative, y.wrong, y.found ? 100.0 * y.wrong / y.found : kNaN, y.flips,
+                        y.found ? 100.0 * y.flips / y.found : kNaN, quantile(y.rotation, 0.5),
+                        quantile(y.rotation, 0.9), y.wrong_ratio_max);
       }
       for (const auto& [key, y] : by_ratio) {
         const auto [condition, set, bin] = key;

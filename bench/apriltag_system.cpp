@@ -23,11 +23,16 @@ namespace bench {
 
 AprilTagSystem::AprilTagSystem(const std::string& family, int decimate, PoseMethod pose)
     : short_name_(family), decimate_(decimate), pose_method_(pose) {
-  if (family == "16h5") family_ = tag16h5_create(), destroy_family_ = tag16h5_destroy;
-  else if (family == "25h9") family_ = tag25h9_create(), destroy_family_ = tag25h9_destroy;
-  else if (family == "36h11") family_ = tag36h11_create(), destroy_family_ = tag36h11_destroy;
-  else if (family == "41h12") family_ = tagStandard41h12_create(), destroy_family_ = tagStandard41h12_destroy;
-  else throw std::invalid_argument("unknown AprilTag family " + family);
+  if (family == "16h5")
+    family_ = tag16h5_create(), destroy_family_ = tag16h5_destroy;
+  else if (family == "25h9")
+    family_ = tag25h9_create(), destroy_family_ = tag25h9_destroy;
+  else if (family == "36h11")
+    family_ = tag36h11_create(), destroy_family_ = tag36h11_destroy;
+  else if (family == "41h12")
+    family_ = tagStandard41h12_create(), destroy_family_ = tagStandard41h12_destroy;
+  else
+    throw std::invalid_argument("unknown AprilTag family " + family);
   detector_ = apriltag_detector_create();
   detector_->nthreads = 1;
   detector_->quad_decimate = float(decimate);
@@ -91,9 +96,10 @@ void AprilTagSystem::set_library_pose(apriltag_detection* d, Detected& det) cons
   Detected ippe = det;
   set_square_pose(ippe, quad_size_, camera_);
   if (!ippe.pose || !ippe.alternative) return;
-  det.alternative = rotation_error_deg(ippe.pose->rvec, pose.rvec) > rotation_error_deg(ippe.alternative->rvec, pose.rvec)
-                        ? ippe.pose
-                        : ippe.alternative;
+  det.alternative =
+      rotation_error_deg(ippe.pose->rvec, pose.rvec) > rotation_error_deg(ippe.alternative->rvec, pose.rvec)
+          ? ippe.pose
+          : ippe.alternative;
 }
 
 std::vector<Detected> AprilTagSystem::detect(const cv::Mat1b& grey) {
@@ -111,8 +117,10 @@ std::vector<Detected> AprilTagSystem::detect(const cv::Mat1b& grey) {
     // bottom-left; convert to OpenCV's convention, clockwise from the top-left.
     for (int k : {3, 2, 1, 0}) det.points.emplace_back(d->p[k][0] - 0.5, d->p[k][1] - 0.5);
     det.center = cv::Point2d(d->c[0] - 0.5, d->c[1] - 0.5);
-    if (pose_method_ == PoseMethod::ippe_square) set_square_pose(det, quad_size_, camera_);
-    else set_library_pose(d, det);
+    if (pose_method_ == PoseMethod::ippe_square)
+      set_square_pose(det, quad_size_, camera_);
+    else
+      set_library_pose(d, det);
     out.push_back(std::move(det));
   }
   apriltag_detections_destroy(found);

@@ -36,9 +36,8 @@ bool run_blur(const Options& options) {
 
   Csv steps_csv(options.out / "blur.csv", {"system", "family", "distance_m", "blur_angle_deg", "blur_fraction",
                                            "blur_px", "markers", "found", "wrong"});
-  Csv summary_csv(options.out / "blur_summary.csv",
-                  {"system", "family", "distance_m", "blur_angle_deg", "markers", "max_fraction_all_found",
-                   "max_px_all_found", "never_missed"});
+  Csv summary_csv(options.out / "blur_summary.csv", {"system", "family", "distance_m", "blur_angle_deg", "markers",
+                                                     "max_fraction_all_found", "max_px_all_found", "never_missed"});
   const int n = int(options.systems.size());
   std::vector<std::unique_ptr<FiducialSystem>> systems(n);
   std::vector<std::vector<std::vector<Step>>> results(n);  // system, angle, steps

@@ -23,13 +23,16 @@ const std::vector<Experiment>& experiments() {
       {"fp", "false positives on marker-free real images (opencv-doc)", run_false_positives},
       {"video", "recall and pose error of moving markers composited into real video (1280x720, JPEG)", run_video},
       {"speed", "median time per 1280x720 and 1920x1080 frame, one thread", run_speed},
-      {"adversarial", "time and recall on grids of dotted tiles that make thousands of candidates, against an ordinary frame",
+      {"adversarial",
+       "time and recall on grids of dotted tiles that make thousands of candidates, against an ordinary frame",
        run_adversarial},
-      {"field", "recall, wrong ids, pose error and time per condition (shadows, motion and rolling shutter, pillbox, "
-                "barrel, low light, Bayer, bent, small at 1080p, crowded, occlusion, H.264), tuning and validation sets",
+      {"field",
+       "recall, wrong ids, pose error and time per condition (shadows, motion and rolling shutter, pillbox, "
+       "barrel, low light, Bayer, bent, small at 1080p, crowded, occlusion, H.264), tuning and validation sets",
        run_field},
-      {"tracking", "the video and field clips with LFTag's tracking off and on: recall (measured, predicted), wrong ids, "
-                   "wrong pose choices, jitter raw and smoothed, frame time against AprilTag 36h11 d2, both sets",
+      {"tracking",
+       "the video and field clips with LFTag's tracking off and on: recall (measured, predicted), wrong ids, "
+       "wrong pose choices, jitter raw and smoothed, frame time against AprilTag 36h11 d2, both sets",
        run_tracking},
   };
   return all;

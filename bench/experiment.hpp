@@ -13,13 +13,13 @@
 namespace bench {
 
 struct Options {
-  bool quick = false;                   // reduced form of every experiment (CI, smoke runs)
-  std::filesystem::path out;            // results directory
-  std::vector<std::string> systems;     // selected system names
-  std::filesystem::path data;           // opencv-doc's examples/data
-  int threads = 1;                      // worker threads (never used for timing)
+  bool quick = false;                // reduced form of every experiment (CI, smoke runs)
+  std::filesystem::path out;         // results directory
+  std::vector<std::string> systems;  // selected system names
+  std::filesystem::path data;        // opencv-doc's examples/data
+  int threads = 1;                   // worker threads (never used for timing)
   std::uint64_t seed = 1;
-  std::filesystem::path save_misses;   // when set: the video and range frames where a system missed a marker
+  std::filesystem::path save_misses;    // when set: the video and range frames where a system missed a marker
   std::vector<std::string> conditions;  // the field (and tracking) experiment's conditions to run (empty: all)
 };
 

@@ -67,7 +67,11 @@ cv::Mat1b make_frame(const cv::Mat1b& base, const Spec& spec, cv::Size size, int
   cv::resize(base(cv::Rect(x, y, w, h)), frame, size, 0, 0, w > size.width ? cv::INTER_AREA : cv::INTER_LINEAR);
   if (flip) cv::flip(frame, frame, flip == 1 ? 1 : flip == 2 ? 0 : -1);
   description += " crop " + std::to_string(x) + "," + std::to_string(y) + "," + std::to_string(w) + "x" +
-                 std::to_string(h) + (flip == 1 ? " flip h" : flip == 2 ? " flip v" : flip == 3 ? " flip hv" : "");
+                 std::to_string(h) +
+                 (flip == 1   ? " flip h"
+                  : flip == 2 ? " flip v"
+                  : flip == 3 ? " flip hv"
+                              : "");
   return frame;
 }
 
@@ -107,8 +111,9 @@ bool run_false_positives(const Options& options) {
           if (next == specs.size()) break;
           spec = specs[next++];
           base = reader.read(spec.source, spec.frame);
-          if (next % 500 == 0) progress("fp " + std::to_string(size.width) + "x" + std::to_string(size.height) + ": " +
-                                        std::to_string(next) + " / " + std::to_string(specs.size()) + " frames");
+          if (next % 500 == 0)
+            progress("fp " + std::to_string(size.width) + "x" + std::to_string(size.height) + ": " +
+                     std::to_string(next) + " / " + std::to_string(specs.size()) + " frames");
         }
         const Source& src = sources[spec.source];
         std::string description = src.path.filename().string() + (src.video ? "#" + std::to_string(spec.frame) : "");

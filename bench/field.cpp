@@ -826,7 +826,6 @@ double elapsed_ms(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-
 // The clips of the chosen conditions (all when none are named), `clips` per condition
 // and set; the H.264 conditions only where GStreamer can code them.
 std::vector<Clip> plan_clips(const Options& options, const Sources& sources, int clips_per_condition, int frames) {
@@ -835,7 +834,8 @@ std::vector<Clip> plan_clips(const Options& options, const Sources& sources, int
 
   std::vector<bool> chosen(kConditions, options.conditions.empty());
   for (const std::string& name : options.conditions) {
-    const auto info = std::find_if(std::begin(kInfo), std::end(kInfo), [&](const ConditionInfo& i) { return name == i.name; });
+    const auto info =
+        std::find_if(std::begin(kInfo), std::end(kInfo), [&](const ConditionInfo& i) { return name == i.name; });
     if (info == std::end(kInfo)) {
       std::string known;
       for (const ConditionInfo& i : kInfo) known += std::string(known.empty() ? "" : ", ") + i.name;
@@ -986,11 +986,13 @@ bool run_field(const Options& options) {
         seen[ci][f][s] = score_frame(detections[ci][f][s], c, f, fid, wrongs[ci][f][s]);
         if (options.save_misses.empty()) continue;
         bool missed = false;
-        for (std::size_t m = 0; m < fid.size(); ++m) missed |= !seen[ci][f][s][m].found && truths[ci][f][m].subset == kVisible;
+        for (std::size_t m = 0; m < fid.size(); ++m)
+          missed |= !seen[ci][f][s][m].found && truths[ci][f][m].subset == kVisible;
         const std::string name = options.systems[s] + "-field-" + kSets[c.set] + "-" + kInfo[c.condition].name +
                                  "-clip" + std::to_string(c.index) + "-frame" + std::to_string(f);
         if (missed) cv::imwrite((options.save_misses / (name + ".png")).string(), images[s][f]);
-        if (!wrongs[ci][f][s].empty()) cv::imwrite((options.save_misses / (name + "-wrong.png")).string(), images[s][f]);
+        if (!wrongs[ci][f][s].empty())
+          cv::imwrite((options.save_misses / (name + "-wrong.png")).string(), images[s][f]);
       }
     }
     std::lock_guard<std::mutex> lock(mutex);

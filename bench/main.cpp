@@ -102,8 +102,11 @@ int run(int argc, char** argv) {
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     bench::progress(std::string("== ") + e.name + (passed ? " done" : " FAILED") + " in " +
                     std::to_string(int(seconds + 0.5)) + " s");
-    meta["experiments"][e.name] = {{"seconds", seconds},   {"passed", passed},         {"date", meta["date"]},
-                                   {"mode", meta["mode"]}, {"systems", options.systems}};
+    meta["experiments"][e.name] = {{"seconds", seconds},
+                                   {"passed", passed},
+                                   {"date", meta["date"]},
+                                   {"mode", meta["mode"]},
+                                   {"systems", options.systems}};
     ok = ok && passed;
     std::ofstream(options.out / "meta.json") << meta.dump(2) << "\n";
   }

@@ -44,9 +44,8 @@ bool run_pose(const Options& options) {
   Csv trials_csv(options.out / "pose.csv", {"system", "family", "sweep", "distance_m", "tilt_deg", "id", "found",
                                             "rotation_error_deg", "translation_error_m"});
   Csv summary_csv(options.out / "pose_summary.csv",
-                  {"system", "family", "sweep", "distance_m", "tilt_deg", "markers", "with_pose",
-                   "median_rotation_deg", "p90_rotation_deg", "median_translation_m", "p90_translation_m",
-                   "median_translation_rel"});
+                  {"system", "family", "sweep", "distance_m", "tilt_deg", "markers", "with_pose", "median_rotation_deg",
+                   "p90_rotation_deg", "median_translation_m", "p90_translation_m", "median_translation_rel"});
   const int n = int(options.systems.size());
   std::vector<std::unique_ptr<FiducialSystem>> systems(n);
   std::vector<std::vector<std::string>> ids(n);
@@ -83,9 +82,9 @@ bool run_pose(const Options& options) {
           trans.push_back(o.translation_error_m);
         }
       }
-      summary_csv.row(system.name(), system.family(), k.sweep, k.distance, k.tilt, int(ids[s].size()),
-                      int(rot.size()), quantile(rot, 0.5), quantile(rot, 0.9), quantile(trans, 0.5),
-                      quantile(trans, 0.9), quantile(trans, 0.5) / k.distance);
+      summary_csv.row(system.name(), system.family(), k.sweep, k.distance, k.tilt, int(ids[s].size()), int(rot.size()),
+                      quantile(rot, 0.5), quantile(rot, 0.9), quantile(trans, 0.5), quantile(trans, 0.9),
+                      quantile(trans, 0.5) / k.distance);
     }
   }
   return true;

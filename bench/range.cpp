@@ -53,8 +53,9 @@ bool run_range(const Options& options) {
           const std::filesystem::path missed =
               options.save_misses.empty()
                   ? std::filesystem::path()
-                  : options.save_misses / (system.name() + "-range-" + std::to_string(int(std::lround(distances[step] * 10))) +
-                                           "dm-marker" + std::to_string(m) + ".png");
+                  : options.save_misses /
+                        (system.name() + "-range-" + std::to_string(int(std::lround(distances[step] * 10))) +
+                         "dm-marker" + std::to_string(m) + ".png");
           return run_trial(system, renderer, ids[m], 1.0, pose, missed);
         },
         after_empty_steps(plan.empty_steps));

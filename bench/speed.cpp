@@ -190,8 +190,8 @@ bool run_speed(const Options& options) {
         for (const auto& [counter, value] : systems[k]->counters())
           counters_csv.row(set, size.width, size.height, name, counter, value / double(v.size()));
       }
-      for (const std::string name : {"mean-threshold-16", "ccl-default", "ccl-sauf", "ccl-bbdt", "ccl-spaghetti",
-                                     "ccl-fastest"}) {
+      for (const std::string name :
+           {"mean-threshold-16", "ccl-default", "ccl-sauf", "ccl-bbdt", "ccl-spaghetti", "ccl-fastest"}) {
         rows.push_back(name);
         const std::vector<double>& v = samples[name];
         speed_csv.row(set, size.width, size.height, name, "reference", int(frames.size()), int(v.size()),

@@ -73,8 +73,7 @@ class FiducialSystem {
 
   // Marker `id` as a scene target with pose (rvec, tvec), drawn with the shared margin
   // and albedo policy above, so that no system gets a friendlier rendering.
-  lftag::SceneTarget target(const std::string& id, double tag_size, const cv::Vec3d& rvec,
-                            const cv::Vec3d& tvec) const;
+  lftag::SceneTarget target(const std::string& id, double tag_size, const cv::Vec3d& rvec, const cv::Vec3d& tvec) const;
 };
 
 // The pose (and the other solution, with the ratio of their reprojection errors) of a

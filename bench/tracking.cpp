@@ -279,7 +279,8 @@ Tally run_clip(FiducialSystem& system, const RenderedClip& clip, int s) {
             k.with_pose_on += std::isfinite(o.rotation_error_deg);
             k.wrong_choices_on += wrong_choice(o), k.flips_on += flipped(o);
           } else {
-            const auto p = std::find_if(predicted.begin(), predicted.end(), [&](const Detected& d) { return d.id == ids[m]; });
+            const auto p =
+                std::find_if(predicted.begin(), predicted.end(), [&](const Detected& d) { return d.id == ids[m]; });
             if (p != predicted.end()) {
               const double error = cv::norm(p->center - centers[m]);
               k.prediction_error_px.push_back(error);
@@ -338,8 +339,10 @@ bool run_tracking(const Options& options) {
   // LFTag systems and the peer; the others have nothing this experiment adds to theirs.
   std::vector<std::string> names;
   for (const std::string& name : options.systems)
-    if (name.rfind("lftag-", 0) == 0 || name == kPeer) names.push_back(name);
-    else progress("tracking: " + name + " left out (LFTag systems and " + kPeer + " only)");
+    if (name.rfind("lftag-", 0) == 0 || name == kPeer)
+      names.push_back(name);
+    else
+      progress("tracking: " + name + " left out (LFTag systems and " + kPeer + " only)");
   if (names.empty()) throw std::invalid_argument("tracking: no LFTag system or " + kPeer + " selected");
   const int n = int(names.size());
   const int threads = std::max(1, options.threads);
@@ -363,11 +366,13 @@ bool run_tracking(const Options& options) {
     parallel_for(source->size(), threads, [&](int c, int worker) {
       const RenderedClip clip = source->render(c, workers[std::size_t(worker)]);
       std::vector<Tally> clip_tallies;
-      for (int s = 0; s < n; ++s) clip_tallies.push_back(run_clip(*workers[std::size_t(worker)][std::size_t(s)], clip, s));
+      for (int s = 0; s < n; ++s)
+        clip_tallies.push_back(run_clip(*workers[std::size_t(worker)][std::size_t(s)], clip, s));
       std::lock_guard<std::mutex> lock(mutex);
       for (int s = 0; s < n; ++s) {
         tallies[s][{source_label, clip.set, "all"}].append(clip_tallies[std::size_t(s)]);
-        if (source_label == "field") tallies[s][{source_label, clip.set, clip.condition}].append(clip_tallies[std::size_t(s)]);
+        if (source_label == "field")
+          tallies[s][{source_label, clip.set, clip.condition}].append(clip_tallies[std::size_t(s)]);
       }
       if (++done % 10 == 0 || done == source->size())
         progress("tracking: " + source_label + " " + std::to_string(done) + " / " + std::to_string(source->size()) +
@@ -375,20 +380,39 @@ bool run_tracking(const Options& options) {
     });
   }
 
-  Csv summary(options.out / "tracking_summary.csv",
-              {"system", "family", "source", "set", "condition", "frames", "markers", "found_per_frame",
-               "recall_per_frame_pct", "found_measured", "found_predicted", "recall_tracked_pct",
-               "predicted_off_target", "median_prediction_error_px", "wrong_per_frame", "wrong_tracked",
-               "with_pose_off", "wrong_choices_off", "flips_off", "wrong_choice_off_pct", "with_pose_on",
-               "wrong_choices_on", "flips_on", "wrong_choice_on_pct", "found_sparse", "recall_sparse_pct",
-               "wrong_sparse"});
+  Csv summary(options.out / "tracking_summary.csv", {"system",
+                                                     "family",
+                                                     "source",
+                                                     "set",
+                                                     "condition",
+                                                     "frames",
+                                                     "markers",
+                                                     "found_per_frame",
+                                                     "recall_per_frame_pct",
+                                                     "found_measured",
+                                                     "found_predicted",
+                                                     "recall_tracked_pct",
+                                                     "predicted_off_target",
+                                                     "median_prediction_error_px",
+                                                     "wrong_per_frame",
+                                                     "wrong_tracked",
+                                                     "with_pose_off",
+                                                     "wrong_choices_off",
+                                                     "flips_off",
+                                                     "wrong_choice_off_pct",
+                                                     "with_pose_on",
+                                                     "wrong_choices_on",
+                                                     "flips_on",
+                                                     "wrong_choice_on_pct",
+                                                     "found_sparse",
+                                                     "recall_sparse_pct",
+                                                     "wrong_sparse"});
   Csv jitter(options.out / "tracking_jitter.csv",
              {"system", "family", "source", "set", "pose", "pairs", "mean_rotation_deg", "p95_rotation_deg",
               "p99_rotation_deg", "mean_translation_mm", "p95_translation_mm", "p99_translation_mm",
               "mean_translation_pct", "p95_translation_pct", "p99_translation_pct"});
-  Csv times(options.out / "tracking_times.csv",
-            {"system", "family", "source", "set", "tracking", "frames", "mean_ms", "p99_ms", "mean_over_peer",
-             "p99_over_peer"});
+  Csv times(options.out / "tracking_times.csv", {"system", "family", "source", "set", "tracking", "frames", "mean_ms",
+                                                 "p99_ms", "mean_over_peer", "p99_over_peer"});
   const auto peer = std::find(names.begin(), names.end(), kPeer);
   for (int s = 0; s < n; ++s) {
     const std::string family = workers[0][std::size_t(s)]->family();
@@ -398,8 +422,7 @@ bool run_tracking(const Options& options) {
       const Tally& k = entry.second;
       const std::string &source = std::get<0>(key), &set = std::get<1>(key), &condition = std::get<2>(key);
       summary.row(names[s], family, source, set, condition, k.frames, k.markers, k.found_off,
-                  percent(k.found_off, k.markers), tracks ? k.found_measured : kNaN,
-                  tracks ? k.found_predicted : kNaN,
+                  percent(k.found_off, k.markers), tracks ? k.found_measured : kNaN, tracks ? k.found_predicted : kNaN,
                   tracks ? percent(k.found_measured + k.found_predicted, k.markers) : kNaN,
                   tracks ? k.predicted_off_target : kNaN, quantile(k.prediction_error_px, 0.5), k.wrong_off,
                   tracks ? k.wrong_on : kNaN, k.with_pose_off, k.wrong_choices_off, k.flips_off,
@@ -428,7 +451,8 @@ bool run_tracking(const Options& options) {
                   mean(v) / peer_mean, quantile(v, 0.99) / peer_p99);
       };
       times_row(tracks ? "off" : "none", k.off_ms);
-      if (tracks) times_row("on", k.on_ms), times_row("sparse", k.sparse_ms), times_row("between-searches", k.unsearched_ms);
+      if (tracks)
+        times_row("on", k.on_ms), times_row("sparse", k.sparse_ms), times_row("between-searches", k.unsearched_ms);
     }
   }
   return true;

@@ -99,16 +99,15 @@ Outcome score(const std::vector<Detected>& detections, const std::string& id, co
   return out;
 }
 
-Outcome run_trial(FiducialSystem& system, const lftag::SceneRenderer& renderer, const std::string& id,
-                  double tag_size, const Pose& pose, const std::filesystem::path& save_if_missed) {
+Outcome run_trial(FiducialSystem& system, const lftag::SceneRenderer& renderer, const std::string& id, double tag_size,
+                  const Pose& pose, const std::filesystem::path& save_if_missed) {
   const cv::Mat1b image = renderer.render({system.target(id, tag_size, pose.rvec, pose.tvec)});
   const Outcome outcome = score(system.detect(image), id, pose, tag_size, renderer.params().camera);
   if (!outcome.found && !save_if_missed.empty()) cv::imwrite(save_if_missed.string(), image);
   return outcome;
 }
 
-std::vector<Step> sweep(const std::vector<double>& values, int markers,
-                        const std::function<Outcome(int, int)>& trial,
+std::vector<Step> sweep(const std::vector<double>& values, int markers, const std::function<Outcome(int, int)>& trial,
                         const std::function<bool(const std::vector<Step>&)>& done) {
   std::vector<Step> steps;
   for (std::size_t s = 0; s < values.size(); ++s) {

@@ -41,12 +41,12 @@ double tilt_from_sight_deg(const Pose& pose);
 cv::Point2d jittered_center(const lftag::Camera& camera, std::mt19937_64& rng);
 
 struct Outcome {
-  bool found = false;  // a detection with the right id at the marker's place
-  int wrong = 0;       // detections with another id, or with the right id elsewhere
+  bool found = false;                     // a detection with the right id at the marker's place
+  int wrong = 0;                          // detections with another id, or with the right id elsewhere
   cv::Point2d center_offset{kNaN, kNaN};  // found centre - true centre, pixels
-  double rotation_error_deg = kNaN;   // of the found detection, when it has a pose
+  double rotation_error_deg = kNaN;       // of the found detection, when it has a pose
   double translation_error_m = kNaN;
-  double depth_error_m = kNaN;  // signed: the found distance to the camera minus the true one
+  double depth_error_m = kNaN;                   // signed: the found distance to the camera minus the true one
   double alternative_rotation_error_deg = kNaN;  // of the planar pose's other solution, when given
   double ambiguity_ratio = kNaN;                 // the system's, when given
 };
@@ -72,8 +72,8 @@ Outcome score(const std::vector<Detected>& detections, const std::string& id, co
 // Renders marker `id` of `system` alone with `pose`, detects it and scores the result.
 // The system must have been given the renderer's camera and `tag_size`. When the marker
 // is not found and `save_if_missed` is set, the frame is written there.
-Outcome run_trial(FiducialSystem& system, const lftag::SceneRenderer& renderer, const std::string& id,
-                  double tag_size, const Pose& pose, const std::filesystem::path& save_if_missed = {});
+Outcome run_trial(FiducialSystem& system, const lftag::SceneRenderer& renderer, const std::string& id, double tag_size,
+                  const Pose& pose, const std::filesystem::path& save_if_missed = {});
 
 // Angle between two rotations, degrees.
 double rotation_error_deg(const cv::Vec3d& rvec_a, const cv::Vec3d& rvec_b);

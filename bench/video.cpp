@@ -31,13 +31,13 @@ constexpr int kMarkers = 4;                         // per frame
 constexpr double kTagSize = 0.1;                    // metres; only the poses' scale depends on it
 constexpr double kSheet = 1 + 2 * kMarginFraction;  // printed sheet edge over tag size
 constexpr double kMinEdge = 30, kMaxEdge = 220;     // projected tag edge, pixels (mean of four sides)
-constexpr double kMaxTilt = 60;        // degrees between the sheet's normal and the line of sight
-constexpr double kMaxShake = 5;        // pixels the camera shake moves the image, per frame
-constexpr double kMaxDefocus = 1.5;    // Gaussian sigma, pixels
-constexpr double kMinNoise = 2, kMaxNoise = 4;  // grey levels
-constexpr double kMaxGradient = 0.6;   // SceneParams::light_gradient
+constexpr double kMaxTilt = 60;                     // degrees between the sheet's normal and the line of sight
+constexpr double kMaxShake = 5;                     // pixels the camera shake moves the image, per frame
+constexpr double kMaxDefocus = 1.5;                 // Gaussian sigma, pixels
+constexpr double kMinNoise = 2, kMaxNoise = 4;      // grey levels
+constexpr double kMaxGradient = 0.6;                // SceneParams::light_gradient
 constexpr int kJpegQuality = 60;
-constexpr double kGap = 4;             // pixels between the sheets' image boxes
+constexpr double kGap = 4;  // pixels between the sheets' image boxes
 
 struct Plan {
   int clips, frames;  // frames per clip
@@ -66,8 +66,11 @@ struct Placement {
 };
 
 Placement random_placement(std::mt19937_64& rng, double edge) {
-  return {{uniform(rng, 0, kFrameSize.width - 1), uniform(rng, 0, kFrameSize.height - 1)}, edge,
-          uniform(rng, 0, kMaxTilt), uniform(rng, 0, 360), uniform(rng, 0, 360)};
+  return {{uniform(rng, 0, kFrameSize.width - 1), uniform(rng, 0, kFrameSize.height - 1)},
+          edge,
+          uniform(rng, 0, kMaxTilt),
+          uniform(rng, 0, 360),
+          uniform(rng, 0, 360)};
 }
 
 // Where the sheet has moved to at the end of the clip: up to 200 px away, 30 % nearer or
@@ -87,8 +90,11 @@ Placement moved(const Placement& a, std::mt19937_64& rng) {
 Placement between(const Placement& a, const Placement& b, double s) {
   const double e = (1 - std::cos(CV_PI * s)) / 2;
   auto mix = [e](double x, double y) { return x + (y - x) * e; };
-  return {{mix(a.center.x, b.center.x), mix(a.center.y, b.center.y)}, std::exp(mix(std::log(a.edge), std::log(b.edge))),
-          mix(a.tilt, b.tilt), mix(a.tilt_axis, b.tilt_axis), mix(a.roll, b.roll)};
+  return {{mix(a.center.x, b.center.x), mix(a.center.y, b.center.y)},
+          std::exp(mix(std::log(a.edge), std::log(b.edge))),
+          mix(a.tilt, b.tilt),
+          mix(a.tilt_axis, b.tilt_axis),
+          mix(a.roll, b.roll)};
 }
 
 // The pose of a placement: facing the camera along the line of sight, tilted, rolled, at
@@ -100,8 +106,7 @@ Pose pose_of(const lftag::Camera& camera, const Placement& p) {
   const double turn = std::asin(std::min(1.0, cv::norm(axis)));
   const cv::Matx33d to_ray = rotation(turn > 1e-12 ? axis * (turn / cv::norm(axis)) : cv::Vec3d());
   const double d = CV_PI / 180;
-  const cv::Matx33d tilt =
-      rotation(cv::Vec3d(std::cos(p.tilt_axis * d), std::sin(p.tilt_axis * d), 0) * (p.tilt * d));
+  const cv::Matx33d tilt = rotation(cv::Vec3d(std::cos(p.tilt_axis * d), std::sin(p.tilt_axis * d), 0) * (p.tilt * d));
   Pose pose;
   cv::Rodrigues(to_ray * tilt * rotation({0, 0, p.roll * d}), pose.rvec);
   // The edge is nearly inverse to the distance (not quite, once tilted): a few corrections.
@@ -153,8 +158,8 @@ struct Clip {
   int source = 0, start = 0;  // video and its first frame
   double defocus = 0, noise = 0, gradient = 0, light_angle = 0;
   double exposure = 1, drift = 0, drift_phase = 0;  // exposure * (1 + drift * sin(...)) per frame
-  std::vector<cv::Matx33d> shake;                  // per frame
-  std::vector<std::vector<Pose>> poses;            // per frame and marker, shake included
+  std::vector<cv::Matx33d> shake;                   // per frame
+  std::vector<std::vector<Pose>> poses;             // per frame and marker, shake included
 };
 
 // Draws a clip. Sheets are placed largest first; a placement that leaves the frame or
@@ -235,7 +240,7 @@ struct Seen {
   bool found = false;
   int wrong = 0;  // wrong detections in the frame whose centre is nearest this marker
   double rotation_deg = kNaN, translation_m = kNaN, depth_m = kNaN;
-  double alternative_rotation_deg = kNaN;  // of the planar pose's other solution
+  double alternative_rotation_deg = kNaN;   // of the planar pose's other solution
   bool wrong_choice = false, flip = false;  // trial.hpp's
 };
 
@@ -299,7 +304,6 @@ void save_miss(const std::filesystem::path& dir, const std::string& system, cons
     }
   cv::imwrite((dir / (name + ".png")).string(), image);
 }
-
 
 std::vector<Source> video_sources(const Options& options) {
   std::vector<Source> videos;
@@ -488,8 +492,7 @@ bool run_video(const Options& options) {
                    "alternative_rotation_error_deg", "wrong_choice"});
   Csv summary_csv(options.out / "video_summary.csv",
                   {"system", "family", "bin_kind", "bin", "markers", "found", "recall_pct", "wrong", "with_pose",
-                   "median_translation_pct", "p90_translation_pct", "median_rotation_deg", "wrong_choices",
-                   "flips"});
+                   "median_translation_pct", "p90_translation_pct", "median_rotation_deg", "wrong_choices", "flips"});
   Csv counters_csv(options.out / "video_counters.csv", {"system", "frames", "counter", "value"});
   // Tallies per bin: "all", then the edge bins, then the tilt bins.
   struct Tally {
@@ -505,10 +508,9 @@ bool run_video(const Options& options) {
         const Truth& t = truth[j][m];
         const Seen& o = seen[j][s][m];
         const double relative = 100 * o.translation_m / t.distance;
-        markers_csv.row(name, families[s], jobs[j].clip, jobs[j].frame, m,
-                        marker_id(ids[s], jobs[j].clip, m), t.edge, t.tilt, t.distance,
-                        int(o.found), o.wrong, o.translation_m, relative, 100 * o.depth_m / t.distance, o.rotation_deg,
-                        o.alternative_rotation_deg, int(o.wrong_choice));
+        markers_csv.row(name, families[s], jobs[j].clip, jobs[j].frame, m, marker_id(ids[s], jobs[j].clip, m), t.edge,
+                        t.tilt, t.distance, int(o.found), o.wrong, o.translation_m, relative,
+                        100 * o.depth_m / t.distance, o.rotation_deg, o.alternative_rotation_deg, int(o.wrong_choice));
         for (int b : {0, 1 + bin_of(kEdgeBins, t.edge), 1 + edge_bins + bin_of(kTiltBins, t.tilt)}) {
           Tally& k = tally[b];
           ++k.markers;
@@ -526,12 +528,12 @@ bool run_video(const Options& options) {
       const Tally& k = tally[b];
       const bool edge = b >= 1 && b <= edge_bins;
       const std::string kind = b == 0 ? "all" : edge ? "edge_px" : "tilt_deg";
-      const std::string bin =
-          b == 0 ? "all" : edge ? bin_name(kEdgeBins, b - 1) : bin_name(kTiltBins, b - 1 - edge_bins);
-      summary_csv.row(name, families[s], kind, bin, k.markers, k.found,
-                      k.markers ? 100.0 * k.found / k.markers : kNaN, k.wrong, int(k.translation_pct.size()),
-                      quantile(k.translation_pct, 0.5), quantile(k.translation_pct, 0.9), quantile(k.rotation_deg, 0.5),
-                      k.wrong_choices, k.flips);
+      const std::string bin = b == 0 ? "all"
+                              : edge ? bin_name(kEdgeBins, b - 1)
+                                     : bin_name(kTiltBins, b - 1 - edge_bins);
+      summary_csv.row(name, families[s], kind, bin, k.markers, k.found, k.markers ? 100.0 * k.found / k.markers : kNaN,
+                      k.wrong, int(k.translation_pct.size()), quantile(k.translation_pct, 0.5),
+                      quantile(k.translation_pct, 0.9), quantile(k.rotation_deg, 0.5), k.wrong_choices, k.flips);
     }
     for (const auto& [counter, value] : counters[s]) counters_csv.row(name, int(jobs.size()), counter, value);
   }

@@ -32,21 +32,21 @@ namespace lftag::fuzz::element {
 
 // lftagdetect's sink formats (DETECT_FORMATS in gst/gstlftagdetect.cpp), in its order;
 // fuzz_element checks at start that the element's template lists exactly these.
-constexpr const char* kFormats[] = {"GRAY8", "I420", "YV12", "NV12", "NV21", "Y42B", "Y444", "RGB",
-                                    "BGR", "RGBx", "BGRx", "xRGB", "xBGR", "RGBA", "BGRA", "ARGB",
-                                    "ABGR", "YUY2", "UYVY", "YVYU", "I420_10LE", "P010_10LE"};
+constexpr const char* kFormats[] = {"GRAY8", "I420", "YV12", "NV12", "NV21",      "Y42B",     "Y444", "RGB",
+                                    "BGR",   "RGBx", "BGRx", "xRGB", "xBGR",      "RGBA",     "BGRA", "ARGB",
+                                    "ABGR",  "YUY2", "UYVY", "YVYU", "I420_10LE", "P010_10LE"};
 constexpr int kMaxSide = 256;
 
 // Stream settings.
 constexpr std::uint8_t kOverlayOutline = 1, kOverlayId = 2, kOverlayAxes = 4;
 constexpr std::uint8_t kCompositions = 8;  // downstream takes overlay compositions (allocation query)
 constexpr std::uint8_t kNoSecondLook = 16;
-constexpr int kMessagesShift = 5;  // messages: none, with-markers, on-change, every-frame
+constexpr int kMessagesShift = 5;          // messages: none, with-markers, on-change, every-frame
 constexpr std::uint8_t kLateFrames = 128;  // late-frames=skip, and a QoS event from downstream
 
 // Buffer flags.
-constexpr std::uint8_t kMeta = 1, kSplit = 2, kNewCaps = 4, kFamiliesText = 8, kFlipOverlay = 16,
-                       kUpstreamMetas = 32, kNoTimestamp = 64, kCamera = 128;
+constexpr std::uint8_t kMeta = 1, kSplit = 2, kNewCaps = 4, kFamiliesText = 8, kFlipOverlay = 16, kUpstreamMetas = 32,
+                       kNoTimestamp = 64, kCamera = 128;
 
 // What a plane's entry in the video meta says (the value is the lie's u32).
 enum Lie : std::uint8_t {

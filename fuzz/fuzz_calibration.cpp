@@ -14,8 +14,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     const lftag::Camera camera = lftag::Camera::parse(text, "fuzz input");
     camera.validate();
-    const lftag::Camera scaled = camera.for_frame(camera.width > 0 ? 2 * camera.width : 640,
-                                                  camera.height > 0 ? 2 * camera.height : 480);
+    const lftag::Camera scaled =
+        camera.for_frame(camera.width > 0 ? 2 * camera.width : 640, camera.height > 0 ? 2 * camera.height : 480);
     scaled.project({{0.1, -0.2, 1.0}});
     scaled.undistort({{10.0, 20.0}});
   } catch (const std::exception&) {

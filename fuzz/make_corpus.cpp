@@ -26,9 +26,9 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "../src/core/calibration_file.hpp"  // kMaxCalibrationBytes
 #include "frame_input.hpp"
 #include "lftag/render.hpp"
-#include "../src/core/calibration_file.hpp"  // kMaxCalibrationBytes
 #if LFTAG_CORPUS_GST
 #include <gst/video/video.h>
 
@@ -134,7 +134,7 @@ void calibration_seeds(const std::string& dir) {
   for (int i = 0; i < 2000; ++i) attributes += " a" + std::to_string(i) + "=\"" + std::to_string(i) + "\"";
   const std::string head = "<?xml version=\"1.0\"?>\n<opencv_storage>\n";
   save(dir + "/large-attributes.xml", head + "<camera_matrix type_id=\"opencv-matrix\"" + attributes + ">\n" + matrix +
-                                         "</camera_matrix>\n" + distortion + "</opencv_storage>\n");
+                                          "</camera_matrix>\n" + distortion + "</opencv_storage>\n");
   // 10,000 elements that are not read, before the ones that are (about 200 KB).
   std::string elements;
   for (int i = 0; i < 10000; ++i) {
@@ -142,8 +142,8 @@ void calibration_seeds(const std::string& dir) {
     elements += "<" + name + ">x</" + name + ">\n";
   }
   save(dir + "/large-elements.xml", "<?xml version=\"1.0\"?>\n<opencv_storage>\n" + elements +
-                                       "<camera_matrix type_id=\"opencv-matrix\">" + matrix + "</camera_matrix>\n" +
-                                       distortion + "</opencv_storage>\n");
+                                        "<camera_matrix type_id=\"opencv-matrix\">" + matrix + "</camera_matrix>\n" +
+                                        distortion + "</opencv_storage>\n");
   // Nested just under the depth limit.
   std::string open, close;
   for (int i = 0; i < lftag::detail::kMaxCalibrationDepth - 2; ++i) {
@@ -151,8 +151,8 @@ void calibration_seeds(const std::string& dir) {
     close = "</n" + std::to_string(i) + ">" + close;
   }
   save(dir + "/large-depth.xml", "<?xml version=\"1.0\"?>\n<opencv_storage>\n" + open + close +
-                                    "<camera_matrix type_id=\"opencv-matrix\">" + matrix + "</camera_matrix>\n" +
-                                    distortion + "</opencv_storage>\n");
+                                     "<camera_matrix type_id=\"opencv-matrix\">" + matrix + "</camera_matrix>\n" +
+                                     distortion + "</opencv_storage>\n");
   const std::string yaml_camera =
       "camera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n  data: [ 500., 0., 320., 0., 500., 240., 0., "
       "0., 1. ]\ndistortion_coefficients: !!opencv-matrix\n  rows: 5\n  cols: 1\n  dt: d\n  data: [ 0., 0., 0., 0., "
@@ -358,7 +358,7 @@ void json_seeds(const std::string& dir) {
     }
     for (int i = 0; i < 3; ++i) put64(out, 1000000000ull * (i + 1));  // pts, dts, duration
     for (int i = 0; i < 3; ++i) put32(out, 100u * i);                 // segment start, time, base
-    put64(out, 42);                                                    // frame
+    put64(out, 42);                                                   // frame
     return out;
   };
   save(dir + "/binary-3x3", binary({found[0]}, 1 | 2 | 16, false));

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# The one code style of gst/ (the C++ style of src/, written down in .clang-format at the
-# top of the tree) checked with clang-format 14 (Debian's clang-format package):
+# The one code style of the C and C++ sources (src/, gst/, tests/, bench/, fuzz/,
+# examples/), written down in .clang-format at the top of the tree, checked with
+# clang-format 14 (Debian's clang-format package):
 #
 #   scripts/check-format.sh          names the files clang-format would change; exit 1 if any
 #   scripts/check-format.sh --fix    reformats them in place
 #
-# src/ keeps its hand formatting (aligned comments, short case labels): it is not checked.
 # Exit 77 (meson's "skipped") when clang-format 14 is not installed: another version
 # formats some constructs differently, so its verdict would not be this style's.
 set -uo pipefail
@@ -23,12 +23,13 @@ for candidate in "${CLANG_FORMAT:-}" clang-format-14 clang-format; do
 done
 if [ -z "$format" ]; then
   echo "SKIP: clang-format 14 is not installed (Debian: apt-get install clang-format), so the" \
-       "style of gst/ is not checked"
+       "style of the sources is not checked"
   exit 77
 fi
 
 cd "$root" || exit 1
-mapfile -t files < <(find gst -maxdepth 1 -type f \( -name '*.cpp' -o -name '*.h' \) | sort)
+mapfile -t files < <(find src gst tests bench fuzz examples -type f \
+  \( -name '*.cpp' -o -name '*.hpp' -o -name '*.h' -o -name '*.c' \) | sort)
 if [ $fix -eq 1 ]; then
   exec "$format" -i --style=file "${files[@]}"
 fi
@@ -45,4 +46,4 @@ if [ ${#bad[@]} -ne 0 ]; then
   echo "Fix with: scripts/check-format.sh --fix"
   exit 1
 fi
-echo "${#files[@]} files of gst/ in the style of .clang-format ($("$format" --version))"
+echo "${#files[@]} source files in the style of .clang-format ($("$format" --version))"

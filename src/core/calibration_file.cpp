@@ -27,8 +27,8 @@
 
 #include <libxml/parser.h>
 #include <libxml/tree.h>
-#include <nlohmann/json.hpp>
 #include <yaml.h>
+#include <nlohmann/json.hpp>
 
 namespace lftag::detail {
 namespace {
@@ -78,9 +78,8 @@ bool contains(std::string_view text, std::string_view needle) {
          text.end();
 }
 
-const std::string kDepthError =
-    "it nests deeper than " + std::to_string(kMaxCalibrationDepth) +
-    " levels; a calibration file is a flat list of entries with matrices in them";
+const std::string kDepthError = "it nests deeper than " + std::to_string(kMaxCalibrationDepth) +
+                                " levels; a calibration file is a flat list of entries with matrices in them";
 
 std::string nodes_error(const char* nodes) {
   return "it has more than " + std::to_string(kMaxCalibrationNodes) + " " + nodes +
@@ -109,8 +108,8 @@ const char* kind_name(const Value& v) {
 }
 
 bool wanted(std::string_view key) {
-  return key == "camera_matrix" || key == "cameraMatrix" || key == "distortion_coefficients" ||
-         key == "distCoeffs" || key == "image_width" || key == "image_height";
+  return key == "camera_matrix" || key == "cameraMatrix" || key == "distortion_coefficients" || key == "distCoeffs" ||
+         key == "image_width" || key == "image_height";
 }
 
 class Entries {
@@ -164,8 +163,8 @@ class YamlEvents {
     if (has_event_) yaml_event_delete(&event_);
     has_event_ = false;
     if (!yaml_parser_parse(&parser_, &event_)) {
-      std::string what = "it is not valid YAML: line " + std::to_string(parser_.problem_mark.line + 1) +
-                         ", column " + std::to_string(parser_.problem_mark.column + 1) + ": " +
+      std::string what = "it is not valid YAML: line " + std::to_string(parser_.problem_mark.line + 1) + ", column " +
+                         std::to_string(parser_.problem_mark.column + 1) + ": " +
                          (parser_.problem ? parser_.problem : "out of memory");
       if (parser_.context) what += std::string(" ") + parser_.context;
       fail(what);
@@ -295,8 +294,7 @@ Entries read_yaml(std::string_view text) {
     }
   }
   events.next();  // document end
-  if (events.next().type != YAML_STREAM_END_EVENT)
-    fail("it holds more than one YAML document, expected one");
+  if (events.next().type != YAML_STREAM_END_EVENT) fail("it holds more than one YAML document, expected one");
   return entries;
 }
 
@@ -451,8 +449,9 @@ Entries read_xml(std::string_view text) {
   // DTD loaded; the bytes are read as UTF-8 whatever they declare, so this test cannot be
   // dodged by another encoding (UTF-16 and UTF-32 have NUL bytes, refused before).
   if (contains(text, "<!DOCTYPE") || contains(text, "<!ENTITY"))
-    fail("it has an XML document type or entity declaration (<!DOCTYPE, <!ENTITY), which calibration files "
-         "may not have");
+    fail(
+        "it has an XML document type or entity declaration (<!DOCTYPE, <!ENTITY), which calibration files "
+        "may not have");
   scan_xml(text);
   static std::once_flag init;
   std::call_once(init, [] { xmlInitParser(); });
@@ -586,7 +585,8 @@ Entries read_json(std::string_view text) {
                                 });
   } catch (const nlohmann::json::exception& e) {
     std::string what = e.what();
-    if (const std::size_t bracket = what.find("] "); what.rfind("[json.exception", 0) == 0 && bracket != std::string::npos)
+    if (const std::size_t bracket = what.find("] ");
+        what.rfind("[json.exception", 0) == 0 && bracket != std::string::npos)
       what.erase(0, bracket + 2);
     fail("it is not valid JSON: " + what);
   }
@@ -612,8 +612,7 @@ double number(const Value& v, const std::string& what) {
          " characters)");
   std::string lower;
   for (char c : s) lower += char(std::tolower(static_cast<unsigned char>(c)));
-  if (!v.is_string &&
-      (lower == ".nan" || lower == ".inf" || lower == "-.inf" || lower == "+.inf"))
+  if (!v.is_string && (lower == ".nan" || lower == ".inf" || lower == "-.inf" || lower == "+.inf"))
     fail(what + " is " + excerpt(s) + ", expected a finite number");
   double d = 0;
   const char* first = s.data() + (!s.empty() && s[0] == '+' ? 1 : 0);
@@ -676,8 +675,8 @@ Matrix matrix(const std::string& key, const Value& v, CheckShape check_shape) {
     fail(name + " data is " +
          (data.kind == Value::Kind::sequence ? "a list of " + std::to_string(data.items.size()) + " values"
                                              : std::string(kind_name(data))) +
-         ", expected " + std::to_string(count) + " numbers (" + std::to_string(m.rows) + "x" +
-         std::to_string(m.cols) + ")");
+         ", expected " + std::to_string(count) + " numbers (" + std::to_string(m.rows) + "x" + std::to_string(m.cols) +
+         ")");
   for (std::size_t i = 0; i < count; ++i) {
     const Value& item = data.kind == Value::Kind::scalar ? data : data.items[i].second;
     const std::string what = name + " data item " + std::to_string(i + 1);
@@ -707,8 +706,9 @@ Camera to_camera(const Entries& entries) {
   const std::string& k_key = k_entry.first;
   const Value* k_value = k_entry.second;
   if (!k_value)
-    fail("no 'camera_matrix' (or 'cameraMatrix') entry, expected an OpenCV calibration with camera_matrix and "
-         "distortion_coefficients");
+    fail(
+        "no 'camera_matrix' (or 'cameraMatrix') entry, expected an OpenCV calibration with camera_matrix and "
+        "distortion_coefficients");
   const Matrix k = matrix(k_key, *k_value, [&](long long rows, long long cols) {
     if (rows != 3 || cols != 3)
       fail("the camera matrix '" + k_key + "' is " + std::to_string(rows) + "x" + std::to_string(cols) +
@@ -740,8 +740,10 @@ Camera to_camera(const Entries& entries) {
     cam.distortion = d.data;
   }
   const double max_size = Camera::kMaxImageSide;
-  if (const Value* w = entries.find("image_width")) cam.width = int(whole(*w, "'image_width'", 0, max_size, " of pixels"));
-  if (const Value* h = entries.find("image_height")) cam.height = int(whole(*h, "'image_height'", 0, max_size, " of pixels"));
+  if (const Value* w = entries.find("image_width"))
+    cam.width = int(whole(*w, "'image_width'", 0, max_size, " of pixels"));
+  if (const Value* h = entries.find("image_height"))
+    cam.height = int(whole(*h, "'image_height'", 0, max_size, " of pixels"));
   cam.calibrated = true;
   try {
     cam.validate();
@@ -783,8 +785,9 @@ Camera read_calibration(std::string_view text) {
   if (body.rfind("\xEF\xBB\xBF", 0) == 0) body.remove_prefix(3);  // UTF-8 byte order mark
   const std::size_t first = body.find_first_not_of(" \t\r\n");
   if (first == std::string_view::npos)
-    fail("it is empty, expected an OpenCV calibration (YAML, XML or JSON) with camera_matrix and "
-         "distortion_coefficients");
+    fail(
+        "it is empty, expected an OpenCV calibration (YAML, XML or JSON) with camera_matrix and "
+        "distortion_coefficients");
   const Entries entries = body[first] == '<' ? read_xml(text) : body[first] == '{' ? read_json(text) : read_yaml(text);
   return to_camera(entries);
 }

@@ -19,11 +19,11 @@ inline constexpr int kMaxCalibrationDepth = 32;               // nested mappings
 inline constexpr int kMaxEntryValues = 256;                   // scalars in one entry that is read
 // Bounds on what the parsers are handed, checked as they go or by a linear pass before
 // them, so that no file under kMaxCalibrationBytes costs more than a few milliseconds:
-inline constexpr int kMaxCalibrationNodes = 20000;            // XML elements, attributes, comments and
-                                                              // references; YAML nodes; JSON values and keys
-inline constexpr int kMaxXmlAttributes = 8;                   // on one XML element (libxml2 is quadratic in them)
-inline constexpr int kMaxYamlDirectives = 8;                  // '%' lines (libyaml is quadratic in %TAG)
-inline constexpr std::size_t kMaxNumberChars = 64;            // characters of a number
+inline constexpr int kMaxCalibrationNodes = 20000;  // XML elements, attributes, comments and
+                                                    // references; YAML nodes; JSON values and keys
+inline constexpr int kMaxXmlAttributes = 8;         // on one XML element (libxml2 is quadratic in them)
+inline constexpr int kMaxYamlDirectives = 8;        // '%' lines (libyaml is quadratic in %TAG)
+inline constexpr std::size_t kMaxNumberChars = 64;  // characters of a number
 
 // Reads OpenCV FileStorage text (YAML, XML or JSON, told apart by their first character).
 // Throws std::runtime_error saying what is wrong and what was expected (no file name: the

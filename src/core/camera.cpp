@@ -131,9 +131,9 @@ Camera Camera::for_frame(int frame_width, int frame_height) const {
   }
   const double sx = double(frame_width) / width, sy = double(frame_height) / height;
   if (std::abs(sx - sy) > 0.01 * std::max(sx, sy))
-    throw std::invalid_argument("the calibration is for " + std::to_string(width) + "x" +
-                                std::to_string(height) + " frames and cannot be scaled to " +
-                                std::to_string(frame_width) + "x" + std::to_string(frame_height));
+    throw std::invalid_argument("the calibration is for " + std::to_string(width) + "x" + std::to_string(height) +
+                                " frames and cannot be scaled to " + std::to_string(frame_width) + "x" +
+                                std::to_string(frame_height));
   Camera c = *this;
   // Scale about pixel edges: a pixel centre x maps to (x + 0.5) * s - 0.5.
   c.fx *= sx, c.fy *= sy;
@@ -195,8 +195,8 @@ void Camera::validate() const {
   for (std::size_t i = 0; i < n; ++i)
     if (!in(distortion[i], -kMaxDistortion, kMaxDistortion))
       throw std::invalid_argument("distortion coefficient " + std::to_string(i + 1) + " (" + show(distortion[i]) +
-                                  ") is out of range, expected finite numbers from " + show(-kMaxDistortion) +
-                                  " to " + show(kMaxDistortion));
+                                  ") is out of range, expected finite numbers from " + show(-kMaxDistortion) + " to " +
+                                  show(kMaxDistortion));
 }
 
 }  // namespace lftag

@@ -17,8 +17,7 @@ Family Family::parse(std::string_view name) {
   std::string_view text = name;
   while (!text.empty() && (text.front() == ' ' || text.front() == '\t')) text.remove_prefix(1);
   while (!text.empty() && (text.back() == ' ' || text.back() == '\t')) text.remove_suffix(1);
-  if (text.size() == 3 && (text[1] == 'x' || text[1] == 'X') && text[0] == text[2] && text[0] >= '2' &&
-      text[0] <= '8')
+  if (text.size() == 3 && (text[1] == 'x' || text[1] == 'X') && text[0] == text[2] && text[0] >= '2' && text[0] <= '8')
     return Family(text[0] - '0');
   throw std::invalid_argument("unknown family '" + std::string(name) +
                               "': expected one of 2x2, 3x3, 4x4, 5x5, 6x6, 7x7, 8x8");
@@ -59,8 +58,8 @@ std::string Family::dictionary_size() const {
 
 void Family::require(TagId id) const {
   if (!contains(id))
-    throw std::out_of_range("id " + id.to_decimal() + " is out of range for family " + name() +
-                            ": ids run from 0 to " + max_id().to_decimal());
+    throw std::out_of_range("id " + id.to_decimal() + " is out of range for family " + name() + ": ids run from 0 to " +
+                            max_id().to_decimal());
 }
 
 int Family::data_index(int g) const {
@@ -70,14 +69,11 @@ int Family::data_index(int g) const {
 }
 
 int Family::grid_index(int data_k) const {
-  if (data_k < 0 || data_k >= data_cell_count())
-    throw std::out_of_range("data cell index out of range");
+  if (data_k < 0 || data_k >= data_cell_count()) throw std::out_of_range("data cell index out of range");
   return data_k < n_ - 2 ? data_k + 1 : data_k + 2;
 }
 
-cv::Point2d Family::nominal_center(int g) const {
-  return {6.0 + 6.0 * (g % n_), 6.0 + 6.0 * (g / n_)};
-}
+cv::Point2d Family::nominal_center(int g) const { return {6.0 + 6.0 * (g % n_), 6.0 + 6.0 * (g / n_)}; }
 
 UnitRect Family::square(int g, int digit) const {
   const int r = g / n_, c = g % n_;
@@ -94,16 +90,14 @@ cv::Point2d Family::center(int g, int digit) const {
 std::vector<cv::Point2d> Family::centers(TagId id) const {
   require(id);
   std::vector<cv::Point2d> out;
-  for (int g = 0; g < cell_count(); ++g)
-    out.push_back(center(g, is_baseline(g) ? 0 : id.digit(data_index(g))));
+  for (int g = 0; g < cell_count(); ++g) out.push_back(center(g, is_baseline(g) ? 0 : id.digit(data_index(g))));
   return out;
 }
 
 std::vector<UnitRect> Family::black_squares(TagId id) const {
   require(id);
   std::vector<UnitRect> out;
-  for (int g = 0; g < cell_count(); ++g)
-    out.push_back(square(g, is_baseline(g) ? 0 : id.digit(data_index(g))));
+  for (int g = 0; g < cell_count(); ++g) out.push_back(square(g, is_baseline(g) ? 0 : id.digit(data_index(g))));
   return out;
 }
 

@@ -133,8 +133,10 @@ std::optional<cv::Size> jpeg_size(Reader& r) {
     // the walk ends with the file.
     int c;
     do {
-      do c = r.get(); while (c >= 0 && c != 0xFF);
-      do c = r.get(); while (c == 0xFF);
+      do c = r.get();
+      while (c >= 0 && c != 0xFF);
+      do c = r.get();
+      while (c == 0xFF);
     } while (c == 0);
     if (c < 0) return std::nullopt;
     if (c == 0xC0 || c == 0xC1 || c == 0xC2 || c == 0xC9 || c == 0xCA) {  // the frames libjpeg decodes
@@ -173,7 +175,8 @@ std::optional<std::uint64_t> pnm_number(Reader& r) {
   int c = r.get();
   while (!digit(c)) {
     if (c == '#') {
-      do c = r.get(); while (c >= 0 && c != '\n' && c != '\r');
+      do c = r.get();
+      while (c >= 0 && c != '\n' && c != '\r');
       c = r.get();
     } else if (space(c)) {
       while (space(c)) c = r.get();
@@ -205,10 +208,12 @@ std::optional<cv::Size> pam_size(Reader& r) {
   if (c != '\n' && c != '\r') return std::nullopt;
   std::optional<std::uint64_t> w, h;
   for (;;) {
-    do c = r.get(); while (space(c));
+    do c = r.get();
+    while (space(c));
     if (c < 0) return std::nullopt;
     if (c == '#') {
-      do c = r.get(); while (c >= 0 && c != '\n' && c != '\r');
+      do c = r.get();
+      while (c >= 0 && c != '\n' && c != '\r');
       if (c < 0) return std::nullopt;
       continue;
     }
@@ -217,7 +222,8 @@ std::optional<cv::Size> pam_size(Reader& r) {
     if (!space(c)) return std::nullopt;
     std::string value;
     if (c != '\n' && c != '\r') {
-      do c = r.get(); while (space(c));
+      do c = r.get();
+      while (space(c));
       for (; value.size() < 255 && c >= 0 && c != '\n' && c != '\r'; c = r.get()) value += char(c);
       if (c != '\n' && c != '\r') return std::nullopt;
       while (!value.empty() && space(static_cast<unsigned char>(value.back()))) value.pop_back();
@@ -355,10 +361,14 @@ bool tiff_header(Reader& r, const unsigned char* head, Header& out) {
     // BYTE, SHORT, LONG, SBYTE, SSHORT, SLONG, LONG8, SLONG8
     std::size_t bytes;
     switch (type) {
-      case 1: case 6: bytes = 1; break;
-      case 3: case 8: bytes = 2; break;
-      case 4: case 9: bytes = 4; break;
-      case 16: case 17: bytes = 8; break;
+      case 1:
+      case 6: bytes = 1; break;
+      case 3:
+      case 8: bytes = 2; break;
+      case 4:
+      case 9: bytes = 4; break;
+      case 16:
+      case 17: bytes = 8; break;
       default: return false;  // libtiff fails the directory
     }
     if (n != 1) return false;
@@ -494,8 +504,7 @@ cv::Mat read_grey_image(const std::string& path, std::uint64_t max_pixels) {
   if (grey.depth() != CV_8U) grey.convertTo(grey, CV_8U);
   if (grey.channels() == 3) cv::cvtColor(grey, grey, cv::COLOR_BGR2GRAY);
   if (grey.channels() == 4) cv::cvtColor(grey, grey, cv::COLOR_BGRA2GRAY);
-  if (grey.type() != CV_8UC1)
-    throw std::runtime_error("cannot decode '" + path + "' as an 8-bit grey image");
+  if (grey.type() != CV_8UC1) throw std::runtime_error("cannot decode '" + path + "' as an 8-bit grey image");
   return grey;
 }
 

@@ -38,10 +38,8 @@ TagId TagId::parse(std::string_view text) {
   for (char c : digits) {
     const int d = hex_value(c);
     if (d < 0 || unsigned(d) >= base)
-      throw std::invalid_argument("id " + quoted + " is not a " +
-                                  (hex ? "hexadecimal" : "decimal") + " number");
-    if (value > (max - unsigned(d)) / base)
-      throw std::invalid_argument("id " + quoted + " does not fit in 128 bits");
+      throw std::invalid_argument("id " + quoted + " is not a " + (hex ? "hexadecimal" : "decimal") + " number");
+    if (value > (max - unsigned(d)) / base) throw std::invalid_argument("id " + quoted + " does not fit in 128 bits");
     value = value * base + unsigned(d);
   }
   return from_u128(value);
@@ -76,8 +74,7 @@ int TagId::digit(int k) const {
 }
 
 TagId TagId::with_digit(int k, int value) const {
-  if (k < 0 || k >= 64 || value < 0 || value > 3)
-    throw std::out_of_range("id digit index or value out of range");
+  if (k < 0 || k >= 64 || value < 0 || value > 3) throw std::out_of_range("id digit index or value out of range");
   const u128 mask = u128(3) << (2 * k);
   return from_u128((to_u128(*this) & ~mask) | (u128(value) << (2 * k)));
 }
@@ -87,8 +84,8 @@ std::string to_string(TagId id) { return id.to_decimal(); }
 std::vector<TagId> parse_id_list(std::string_view text, std::size_t max_ids) {
   std::vector<TagId> ids;
   auto too_many = [&] {
-    throw std::invalid_argument("the id list '" + std::string(text) + "' holds more than " +
-                                std::to_string(max_ids) + " ids");
+    throw std::invalid_argument("the id list '" + std::string(text) + "' holds more than " + std::to_string(max_ids) +
+                                " ids");
   };
   std::size_t start = 0;
   while (start <= text.size()) {
@@ -96,11 +93,12 @@ std::vector<TagId> parse_id_list(std::string_view text, std::size_t max_ids) {
     // "1, 2" and "3 - 5" as the family lists allow them.
     const std::string_view item = trim(text.substr(start, comma - start));
     if (item.empty())
-      throw std::invalid_argument("the id list '" + std::string(text) + "' has an empty item: give ids such as 0-11,40");
+      throw std::invalid_argument("the id list '" + std::string(text) +
+                                  "' has an empty item: give ids such as 0-11,40");
     const std::size_t dash = item.find('-');
     if (dash == 0)
-      throw std::invalid_argument("id '" + std::string(item) + "' is negative: ids start at 0 (a range is FIRST-LAST, " +
-                                  "such as 0-11)");
+      throw std::invalid_argument("id '" + std::string(item) +
+                                  "' is negative: ids start at 0 (a range is FIRST-LAST, " + "such as 0-11)");
     if (dash == std::string_view::npos) {
       ids.push_back(TagId::parse(item));
     } else {

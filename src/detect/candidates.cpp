@@ -158,7 +158,7 @@ namespace {
 // A white region with the child count of a family: a topological candidate, not yet measured.
 struct Topological {
   int region;
-  int family;  // index into params.families
+  int family;                // index into params.families
   int first_kid, kid_count;  // into the kids list
 };
 
@@ -173,9 +173,8 @@ void order_by_plausibility(const RegionTree& tree, std::vector<Topological>& all
   std::vector<int> order(all.size());
   std::iota(order.begin(), order.end(), 0);
   const auto crowd = [&](int i) { return siblings[tree.regions[all[i].region].parent + 1]; };
-  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
-    return rank[a] != rank[b] ? rank[a] < rank[b] : crowd(a) < crowd(b);
-  });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return rank[a] != rank[b] ? rank[a] < rank[b] : crowd(a) < crowd(b); });
   std::vector<Topological> sorted;
   sorted.reserve(all.size());
   for (int i : order) sorted.push_back(all[i]);
@@ -186,8 +185,8 @@ void order_by_plausibility(const RegionTree& tree, std::vector<Topological>& all
 
 void find_candidates(const RegionTree& tree, const BinaryImage& binary, const ImageView& image,
                      const DetectorParams& params, const Camera& camera, std::vector<Candidate>& out,
-                     DetectionStats& stats, const PatchFrame& patch, std::vector<Candidate>* area_rejected,
-                     int* budget, std::vector<Candidate>* skipped) {
+                     DetectionStats& stats, const PatchFrame& patch, std::vector<Candidate>* area_rejected, int* budget,
+                     std::vector<Candidate>* skipped) {
   out.clear();
   if (area_rejected) area_rejected->clear();
   if (skipped) skipped->clear();

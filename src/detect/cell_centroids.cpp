@@ -54,9 +54,9 @@ struct Quad {
 Quad observed_quad(const UnitRect& r, double grow, const cv::Matx33d& homography, const Camera& camera,
                    const ImageView& image) {
   std::vector<cv::Point2d> q;
-  for (const cv::Point2d u : {cv::Point2d(r.x - grow, r.y - grow), cv::Point2d(r.x + r.width + grow, r.y - grow),
-                              cv::Point2d(r.x + r.width + grow, r.y + r.height + grow),
-                              cv::Point2d(r.x - grow, r.y + r.height + grow)}) {
+  for (const cv::Point2d u :
+       {cv::Point2d(r.x - grow, r.y - grow), cv::Point2d(r.x + r.width + grow, r.y - grow),
+        cv::Point2d(r.x + r.width + grow, r.y + r.height + grow), cv::Point2d(r.x - grow, r.y + r.height + grow)}) {
     const cv::Vec3d p = homography * cv::Vec3d(u.x, u.y, 1);
     q.emplace_back(p[0] / p[2], p[1] / p[2]);
   }

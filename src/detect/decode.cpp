@@ -59,7 +59,8 @@ void distort(const Camera& camera, std::vector<cv::Point2d>& points) {
   if (!camera.has_distortion() || points.empty()) return;
   std::vector<cv::Point3d> rays;
   rays.reserve(points.size());
-  for (const cv::Point2d& p : points) rays.emplace_back((p.x - camera.cx) / camera.fx, (p.y - camera.cy) / camera.fy, 1.0);
+  for (const cv::Point2d& p : points)
+    rays.emplace_back((p.x - camera.cx) / camera.fx, (p.y - camera.cy) / camera.fy, 1.0);
   points = camera.project(rays);
 }
 
@@ -89,9 +90,8 @@ std::optional<cv::Matx33d> square_to_quad(const std::array<cv::Point2d, 4>& q) {
   const double den = d1.cross(d2);
   if (!(std::abs(den) > 0)) return std::nullopt;
   const double g = sum.cross(d2) / den, h = d1.cross(sum) / den;
-  return cv::Matx33d(q[1].x - q[0].x + g * q[1].x, q[3].x - q[0].x + h * q[3].x, q[0].x,
-                     q[1].y - q[0].y + g * q[1].y, q[3].y - q[0].y + h * q[3].y, q[0].y,
-                     g, h, 1.0);
+  return cv::Matx33d(q[1].x - q[0].x + g * q[1].x, q[3].x - q[0].x + h * q[3].x, q[0].x, q[1].y - q[0].y + g * q[1].y,
+                     q[3].y - q[0].y + h * q[3].y, q[0].y, g, h, 1.0);
 }
 
 // The homography taking the four points `from` to `to` (h33 = 1): through the unit square.
@@ -152,7 +152,6 @@ std::vector<cv::Point2d> square(double a, double b) {
   return {cv::Point2d(a, a), cv::Point2d(b, a), cv::Point2d(b, b), cv::Point2d(a, b)};
 }
 
-
 // For 2x2, where the four blobs fix the homography and leave no residual: the grey levels
 // where reading `id` under h must be black (the square centres and the middle of the
 // border) and white (the middle of the white ring inside the border and the middle of the
@@ -161,17 +160,19 @@ struct Photometry {
   std::vector<cv::Point2d> black_units, white_units, pixels;
   std::vector<double> black, white;
 };
-Photometry photometry(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
-                      const Camera& camera) {
+Photometry photometry(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image, const Camera& camera) {
   Photometry m;
   const double s = f.side();
-  for (int g = 0; g < f.cell_count(); ++g) m.black_units.push_back(f.center(g, f.is_baseline(g) ? 0 : id.digit(f.data_index(g))));
+  for (int g = 0; g < f.cell_count(); ++g)
+    m.black_units.push_back(f.center(g, f.is_baseline(g) ? 0 : id.digit(f.data_index(g))));
   for (int i = 0; i < 8; ++i) {
     const double t = 1 + (s - 2) * (i + 0.5) / 8;  // along the border's middle line
-    for (const cv::Point2d& p : {cv::Point2d(t, 1), cv::Point2d(s - 1, t), cv::Point2d(s - t, s - 1), cv::Point2d(1, s - t)})
+    for (const cv::Point2d& p :
+         {cv::Point2d(t, 1), cv::Point2d(s - 1, t), cv::Point2d(s - t, s - 1), cv::Point2d(1, s - t)})
       m.black_units.push_back(p);
     const double r = 3 + (s - 6) * (i + 0.5) / 8;  // along the white ring
-    for (const cv::Point2d& p : {cv::Point2d(r, 3), cv::Point2d(s - 3, r), cv::Point2d(s - r, s - 3), cv::Point2d(3, s - r)})
+    for (const cv::Point2d& p :
+         {cv::Point2d(r, 3), cv::Point2d(s - 3, r), cv::Point2d(s - r, s - 3), cv::Point2d(3, s - r)})
       m.white_units.push_back(p);
   }
   m.white_units.emplace_back(s / 2, s / 2);
@@ -189,8 +190,7 @@ Photometry photometry(const Family& f, TagId id, const cv::Matx33d& h, const Ima
 
 // The fraction of (should-be-white, should-be-black) sample pairs whose grey levels are in
 // the wrong order.
-double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
-                        const Camera& camera) {
+double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image, const Camera& camera) {
   Photometry m = photometry(f, id, h, image, camera);
   // For each white sample, the black samples at least as bright (sorted: n log n, where
   // every pair was n^2).
@@ -202,8 +202,7 @@ double misordered_pairs(const Family& f, TagId id, const cv::Matx33d& h, const I
 
 // Whether no sample that must be white is as dark as one that must be black (the
 // misordered pairs are none).
-bool no_misordered_pair(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image,
-                        const Camera& camera) {
+bool no_misordered_pair(const Family& f, TagId id, const cv::Matx33d& h, const ImageView& image, const Camera& camera) {
   const Photometry m = photometry(f, id, h, image, camera);
   return *std::min_element(m.white.begin(), m.white.end()) > *std::max_element(m.black.begin(), m.black.end());
 }
@@ -242,7 +241,6 @@ double smallest_scale(const cv::Matx33d& h, cv::Point2d u) {
   const double smallest = largest > 0 ? det / largest : 0.0;
   return std::isfinite(smallest) ? smallest : 0.0;
 }
-
 
 double edge_gradient(const ImageView& image, const Camera& camera, const cv::Matx33d& h, double a, double b) {
   // About one sample per pixel of projected edge, at least 8 and at most 16 per side: the
@@ -348,8 +346,10 @@ bool maps_marker(const Family& f, const cv::Matx33d& h) {
   for (const cv::Point2d& u : f.outer_corners()) {
     const cv::Vec3d q = h * cv::Vec3d(u.x, u.y, 1.0);
     if (!std::isfinite(q[0]) || !std::isfinite(q[1]) || !std::isfinite(q[2]) || q[2] == 0) return false;
-    if (first == 0) first = q[2];
-    else if ((q[2] > 0) != (first > 0)) return false;
+    if (first == 0)
+      first = q[2];
+    else if ((q[2] > 0) != (first > 0))
+      return false;
   }
   return true;
 }
@@ -376,7 +376,8 @@ double read_digits(const Candidate& c, const CellCentres& design, const CellCent
     residual += nearest;
     if (!worst) continue;
     const cv::Point2d off = blob - projected[g][digit];
-    d.worst_cell = std::max(d.worst_cell, cv::norm(pixels_to_units(d.homography, design[g][digit]) * cv::Vec2d(off.x, off.y)));
+    d.worst_cell =
+        std::max(d.worst_cell, cv::norm(pixels_to_units(d.homography, design[g][digit]) * cv::Vec2d(off.x, off.y)));
   }
   return residual;
 }
@@ -464,8 +465,8 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   for (int hypothesis = 0; hypothesis < 16; ++hypothesis) {
     auto start = std::chrono::steady_clock::now();
     const int d2 = hypothesis / 4, d3 = hypothesis % 4;
-    const auto hm = four_point_homography({design[kc[0]][0], design[kc[1]][0], design[kc[3]][d3], design[kc[2]][d2]},
-                                          observed);
+    const auto hm =
+        four_point_homography({design[kc[0]][0], design[kc[1]][0], design[kc[3]][d3], design[kc[2]][d2]}, observed);
     stats.hypotheses_ms += elapsed_ms(start);
     if (!hm) continue;
     start = std::chrono::steady_clock::now();
@@ -496,8 +497,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
         std::optional<cv::Matx33d> h;
         if (same == refits.end()) h = refit(c, design, d);  // else it failed before
         const bool fitted = h && maps_marker(f, *h);
-        if (same == refits.end())
-          refits.push_back({d.id, d.blob_of_cell, fitted ? readings.size() : std::size_t(-1)});
+        if (same == refits.end()) refits.push_back({d.id, d.blob_of_cell, fitted ? readings.size() : std::size_t(-1)});
         if (fitted) {
           d.homography = *h;
           project_centres(design, d.homography, projected);
@@ -577,10 +577,10 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   // Rejected whichever reading the grey levels would make best: the verdict names the
   // first check that no reading passed.
   if (passing == 0)
-    return rejected(resolved == 0                      ? Verdict::resolution
-                    : placed == 0                      ? Verdict::residual
-                    : !zero.empty() && zeros == 0      ? Verdict::residual  // 2x2: tau3
-                                                       : Verdict::ink);
+    return rejected(resolved == 0                 ? Verdict::resolution
+                    : placed == 0                 ? Verdict::residual
+                    : !zero.empty() && zeros == 0 ? Verdict::residual  // 2x2: tau3
+                                                  : Verdict::ink);
 
   // Then the grey levels: the gradient along the projected inner border edge, and the
   // decoding error of each hypothesis (2x2: of those free of misordered pairs, error 0).

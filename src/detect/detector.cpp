@@ -32,9 +32,9 @@ cv::Mat ImageView::mat() const {
 
 double decode_threshold_default(const Family& family) {
   switch (family.n()) {
-    case 2: return 0.0;     // misordered black/white sample pairs (see decode.cpp): none
-    case 3: return 5e-4;    // the paper
-    case 4: return 1e-3;    // the paper
+    case 2: return 0.0;   // misordered black/white sample pairs (see decode.cpp): none
+    case 3: return 5e-4;  // the paper
+    case 4: return 1e-3;  // the paper
     default: return 1e-3 * family.data_cell_count() / 14.0;  // the paper's per-cell value, scaled
   }
 }
@@ -75,8 +75,8 @@ auto fields(const DetectorParams& p) {
   return std::tie(p.families, p.threshold_window, p.threshold_offset, p.second_look, p.max_second_looks,
                   p.max_candidates, p.deadline_ms, p.min_child_fraction, p.max_child_ratio, p.max_extra_children,
                   p.dilation, p.centroid_reference, p.max_ink_ratio, p.min_spread_ratio, p.max_decode_error,
-                  p.max_cell_residual, p.min_pixels_per_unit, p.min_decode_margin, p.min_noise_margin,
-                  p.max_ink_spread, p.camera, p.tag_size, p.refine_pose, p.shape_choice_ratio);
+                  p.max_cell_residual, p.min_pixels_per_unit, p.min_decode_margin, p.min_noise_margin, p.max_ink_spread,
+                  p.camera, p.tag_size, p.refine_pose, p.shape_choice_ratio);
 }
 }  // namespace
 
@@ -127,8 +127,8 @@ bool already_found(const std::vector<Detection>& found, cv::Point2d q) {
 }
 
 // Key points, decoding and pose of every candidate, most plausible first, until the
-// deadline (a second look's; none for the frame's own); detections are appended to `found`, except where a detection already stands
-// (a second look can overlap one).
+// deadline (a second look's; none for the frame's own); detections are appended to `found`, except where a detection
+// already stands (a second look can overlap one).
 void decode_candidates(const std::vector<detail::Candidate>& candidates, const ImageView& work, const Camera& camera,
                        const DetectorParams& p, bool second_look, const detail::Deadline& deadline,
                        DetectionStats& stats, DetectionTrace* trace, std::vector<Detection>& found) {
@@ -137,7 +137,8 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     if (deadline.passed()) {
       stats.skipped_by_deadline += std::int64_t(candidates.size() - i);
       if (trace)
-        for (; i < candidates.size(); ++i) trace->verdicts.push_back(verdict_of(candidates[i], second_look, Stage::deadline));
+        for (; i < candidates.size(); ++i)
+          trace->verdicts.push_back(verdict_of(candidates[i], second_look, Stage::deadline));
       return;
     }
     if (trace) {
@@ -163,7 +164,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     // 3), so no two sides pass.
     std::optional<detail::KeyPoints> k;
     std::optional<detail::Decoding> d, best;  // accepted; the best reading of any side (for the trace)
-    std::array<bool, 2> passed{};  // residual, margin: for any side
+    std::array<bool, 2> passed{};             // residual, margin: for any side
     for (const detail::KeyPoints& side : sides) {
       if (trace) {
         std::array<cv::Point2d, 4> points;
@@ -187,10 +188,14 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
       // Where the candidate stopped: the last of the paper's constraints that no side
       // passed, or the furthest any side's decoding got.
       Stage stage = Stage::detected;
-      if (!constraints.geometry) stage = Stage::geometry;
-      else if (!constraints.angle) stage = Stage::angle;
-      else if (!constraints.collinearity) stage = Stage::collinearity;
-      else if (!best) stage = Stage::decoding;
+      if (!constraints.geometry)
+        stage = Stage::geometry;
+      else if (!constraints.angle)
+        stage = Stage::angle;
+      else if (!constraints.collinearity)
+        stage = Stage::collinearity;
+      else if (!best)
+        stage = Stage::decoding;
       else if (!d)
         stage = passed[1]                                      ? Stage::ink
                 : passed[0]                                    ? Stage::margin
@@ -227,13 +232,16 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
         b.centroid = cells[g], b.point = ideal[g];
       }
     }
-    for (int g = 0; g < c.family.cell_count(); ++g) det.centroids.push_back(for_pose.blobs[d->blob_of_cell[g]].centroid);
+    for (int g = 0; g < c.family.cell_count(); ++g)
+      det.centroids.push_back(for_pose.blobs[d->blob_of_cell[g]].centroid);
     for (int i = 0; i < 4; ++i) det.keypoints[i] = for_pose.blobs[k->blob[i]].centroid;
     const bool posed = detail::estimate_pose(for_pose, *d, camera, p, det);
     stats.pose_ms += elapsed_ms(start);
     Stage outcome = Stage::detected;
-    if (!posed) outcome = Stage::pose;
-    else if (already_found(found, det.center)) outcome = Stage::duplicate;
+    if (!posed)
+      outcome = Stage::pose;
+    else if (already_found(found, det.center))
+      outcome = Stage::duplicate;
     if (trace) trace->verdicts.back().stage = outcome;
     if (outcome != Stage::detected) continue;
     found.push_back(std::move(det));
@@ -244,7 +252,7 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
 // the aligned outline, which is where the pose's perspective correction expects a blob's
 // centroid. None when no pose could be computed.
 std::optional<Detection> pose_outline(const detail::OutlineReading& reading, const Family& f, const Camera& camera,
-                                           const DetectorParams& p) {
+                                      const DetectorParams& p) {
   detail::Candidate c;
   c.family = f;
   detail::Decoding d;
@@ -253,8 +261,8 @@ std::optional<Detection> pose_outline(const detail::OutlineReading& reading, con
   std::vector<cv::Point2d> observed;
   for (int g = 0; g < f.cell_count(); ++g) {
     const UnitRect s = f.square(g, f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g)));
-    std::vector<cv::Point2d> square = {{s.x, s.y}, {s.x + s.width, s.y}, {s.x + s.width, s.y + s.height},
-                                       {s.x, s.y + s.height}};
+    std::vector<cv::Point2d> square = {
+        {s.x, s.y}, {s.x + s.width, s.y}, {s.x + s.width, s.y + s.height}, {s.x, s.y + s.height}};
     cv::perspectiveTransform(square, square, reading.homography);
     observed.push_back(detail::polygon_centroid(square));
     d.blob_of_cell.push_back(g);
@@ -366,8 +374,8 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
   for (const std::array<cv::Point2d, 4>& outline : detail::coarse_outlines(binary, frame))
     for (const Family& f : p.families) {
       OutlineVerdict* verdict = trace ? &trace->outline_reads.emplace_back() : nullptr;
-      const std::optional<detail::OutlineReading> reading = read_one_outline(
-          work, outline, f, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict);
+      const std::optional<detail::OutlineReading> reading =
+          read_one_outline(work, outline, f, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict);
       if (!reading || !add_outline_detection(*reading, f, camera, p, found, read_places, verdict)) continue;
       ++stats.decoded, ++stats.second_look_found, ++stats.outline_found;
       return;  // one marker to a patch
@@ -392,8 +400,7 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
   };
   for (const ExpectedMarker& e : expected) {
     const bool sought = std::find(p.families.begin(), p.families.end(), e.family) != p.families.end();
-    const bool present =
-        std::any_of(found.begin(), found.end(), [&](const Detection& d) { return is_expected(e, d); });
+    const bool present = std::any_of(found.begin(), found.end(), [&](const Detection& d) { return is_expected(e, d); });
     if (!sought || present) continue;
     if (deadline.passed()) {
       ++stats.skipped_by_deadline;
@@ -474,7 +481,7 @@ struct Detector::Impl {
   detail::RegionTree tree;
   std::vector<detail::Candidate> candidates, area_rejected, skipped;
   PatchLook patch_look;  // the second look's and the expected markers' patches
-  Camera camera;  // for the last frame size
+  Camera camera;         // for the last frame size
   cv::Size camera_size;
 
   const Camera& camera_for(int w, int h) {
@@ -510,8 +517,9 @@ std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints
   stats.frames = 1;
   std::vector<Detection> found;
   if (trace) *trace = DetectionTrace{};
-  if (image.empty()) throw std::invalid_argument("the image is empty (" + std::to_string(image.width) + "x" +
-                                                 std::to_string(image.height) + ")");
+  if (image.empty())
+    throw std::invalid_argument("the image is empty (" + std::to_string(image.width) + "x" +
+                                std::to_string(image.height) + ")");
   const DetectorParams& p = s.params;
   auto start = Clock::now();
   const detail::Deadline deadline(detail::Deadline::thread_time(), p.deadline_ms);
@@ -540,7 +548,8 @@ std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints
   int* const budget_left = p.max_candidates > 0 ? &budget : nullptr;
   const auto record_rejected = [&](bool second_look) {
     if (!trace) return;
-    for (const detail::Candidate& c : s.area_rejected) trace->verdicts.push_back(verdict_of(c, second_look, Stage::area));
+    for (const detail::Candidate& c : s.area_rejected)
+      trace->verdicts.push_back(verdict_of(c, second_look, Stage::area));
     for (const detail::Candidate& c : s.skipped) trace->verdicts.push_back(verdict_of(c, second_look, Stage::budget));
   };
 

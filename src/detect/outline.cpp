@@ -43,7 +43,7 @@ constexpr double kMaxDefocusStretch = 4;
 
 // The fixed structure along one axis of the marker: 0 black, 1 white, 0.5 a data strip.
 double axis_class(double u, int side) {
-  if (u < 0 || u >= side) return 1;  // the margin
+  if (u < 0 || u >= side) return 1;      // the margin
   if (u < 2 || u >= side - 2) return 0;  // the border
   if (u < 4) return 1;                   // the white ring
   const double v = std::fmod(u - 4, 6);  // within a cell's 6-unit pitch
@@ -167,7 +167,8 @@ class SparseTemplate {
     const int x0 = std::min(int(x), std::max(image.cols - 2, 0)), y0 = std::min(int(y), std::max(image.rows - 2, 0));
     const int x1 = std::min(x0 + 1, image.cols - 1), y1 = std::min(y0 + 1, image.rows - 1);
     const float fx = x - x0, fy = y - y0;
-    return (1 - fy) * ((1 - fx) * image(y0, x0) + fx * image(y0, x1)) + fy * ((1 - fx) * image(y1, x0) + fx * image(y1, x1));
+    return (1 - fy) * ((1 - fx) * image(y0, x0) + fx * image(y0, x1)) +
+           fy * ((1 - fx) * image(y1, x0) + fx * image(y1, x1));
   }
 
   SparseTemplate() = default;
@@ -180,7 +181,8 @@ class SparseTemplate {
     for (const Point& p : points_) {
       const float z = w(2, 0) * p.x + w(2, 1) * p.y + w(2, 2);
       if (!(std::abs(z) > 1e-12f)) return 0;
-      const double g = sample((w(0, 0) * p.x + w(0, 1) * p.y + w(0, 2)) / z, (w(1, 0) * p.x + w(1, 1) * p.y + w(1, 2)) / z);
+      const double g =
+          sample((w(0, 0) * p.x + w(0, 1) * p.y + w(0, 2)) / z, (w(1, 0) * p.x + w(1, 1) * p.y + w(1, 2)) / z);
       s += g, ss += g * g, st += g * p.value;
     }
     const double n = double(points_.size()), variance = ss - s * s / n;
@@ -389,7 +391,8 @@ CellSamples sample_cell(const ImageView& image, const cv::Matx33d& h, int r, int
   CellSamples s;
   for (int i = 0; i < kCellGrid; ++i)
     for (int j = 0; j < kCellGrid; ++j)
-      s.grey[i * kCellGrid + j] = grey_at(image, apply(h, {6.0 * c + grid_coordinate(j), 6.0 * r + grid_coordinate(i)}));
+      s.grey[i * kCellGrid + j] =
+          grey_at(image, apply(h, {6.0 * c + grid_coordinate(j), 6.0 * r + grid_coordinate(i)}));
   return s;
 }
 
@@ -554,8 +557,8 @@ class PixelModel {
     const cv::Matx33d to_units = h.inv();
     // The marker and its one-unit white margin, with room for the widest blur.
     std::vector<cv::Point2f> margin;
-    for (const cv::Point2d& u : {cv::Point2d(-1, -1), cv::Point2d(side + 1, -1), cv::Point2d(side + 1, side + 1),
-                                 cv::Point2d(-1, side + 1)})
+    for (const cv::Point2d& u :
+         {cv::Point2d(-1, -1), cv::Point2d(side + 1, -1), cv::Point2d(side + 1, side + 1), cv::Point2d(-1, side + 1)})
       margin.emplace_back(cv::Point2f(apply(h, u)));
     const int pad = int(std::ceil(3 * kMaxBlur * pixels_per_unit + cv::norm(smear_) * kSmearScales.back() / 2)) + 1;
     box_ = cv::boundingRect(margin);
@@ -571,8 +574,8 @@ class PixelModel {
       // Every position of the cell's square, and the blur around it.
       const double x = 4 + 6 * (g % family.n()), y = 4 + 6 * (g / family.n());
       std::vector<cv::Point2f> reach;
-      for (const cv::Point2d& u : {cv::Point2d(x, y), cv::Point2d(x + 4, y), cv::Point2d(x + 4, y + 4),
-                                   cv::Point2d(x, y + 4)})
+      for (const cv::Point2d& u :
+           {cv::Point2d(x, y), cv::Point2d(x + 4, y), cv::Point2d(x + 4, y + 4), cv::Point2d(x, y + 4)})
         reach.emplace_back(cv::Point2f(apply(h, u)));
       cv::Rect r = cv::boundingRect(reach);
       r = cv::Rect(r.x - box_.x - pad, r.y - box_.y - pad, r.width + 2 * pad, r.height + 2 * pad) &
@@ -630,7 +633,9 @@ class PixelModel {
 
   // The least motion blur a reading can report (Reading::smear) for a smear found while
   // aligning, frame pixels: every length it tries is a scale of that one.
-  static double least_smear(cv::Point2d smear) { return cv::norm(smear) > 0.5 ? cv::norm(smear) * kSmearScales.front() : 0; }
+  static double least_smear(cv::Point2d smear) {
+    return cv::norm(smear) > 0.5 ? cv::norm(smear) * kSmearScales.front() : 0;
+  }
 
   struct Reading {
     TagId id;
@@ -662,9 +667,7 @@ class PixelModel {
     for (const double scale : smeared ? kSmearScales : std::vector<double>{0}) {
       // The coverage smeared once per length; each optical blur starts from it.
       const cv::Mat1f kernel = scale == 0 ? cv::Mat1f() : smear_kernel(smear_ * scale);
-      const auto smear = [&](const cv::Mat1f& m) {
-        return scale == 0 ? m : smeared_by(m, kernel);
-      };
+      const auto smear = [&](const cv::Mat1f& m) { return scale == 0 ? m : smeared_by(m, kernel); };
       const cv::Mat1f fixed = smear(fixed_);
       std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
       for (std::size_t i = 0; i < cells_.size(); ++i)
@@ -679,16 +682,19 @@ class PixelModel {
     }
     if (best_fixed.empty()) return best;
     const Fit fit = fit_at(best_blur * pixels_per_unit, best_fixed, best_squares, start, true);
-    best = {fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
-            cv::norm(smear_) * best_scale, fit.rss > 0 ? fit.least_gain / (fit.rss / fit.samples) : 0,
-            fit.noise_margin, fit.evidence};
+    best = {fit.id,
+            fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
+            cv::norm(smear_) * best_scale,
+            fit.rss > 0 ? fit.least_gain / (fit.rss / fit.samples) : 0,
+            fit.noise_margin,
+            fit.evidence};
     if (!(fit.ink > 0.4 * contrast)) best.margin = 0;
     return best;
   }
 
  private:
   inline static const std::vector<double> kSmearScales = {0.85, 0.92, 1.0, 1.08, 1.16};  // of the smear found
-  static constexpr double kMaxBlur = 2.2;      // units
+  static constexpr double kMaxBlur = 2.2;                                                // units
   static constexpr int kMaxPixels = 1 << 20;  // a marker this large needs no outline reading
 
   struct Coverage {
@@ -736,8 +742,10 @@ class PixelModel {
     // A copy only of what the sums below change (`total`); the squares' maps are read only.
     const auto blurred = [&](const cv::Mat1f& m, bool copy) {
       cv::Mat1f out;
-      if (sigma > 0.2) cv::GaussianBlur(m, out, cv::Size(), sigma, sigma, cv::BORDER_CONSTANT);
-      else out = copy ? m.clone() : m;
+      if (sigma > 0.2)
+        cv::GaussianBlur(m, out, cv::Size(), sigma, sigma, cv::BORDER_CONSTANT);
+      else
+        out = copy ? m.clone() : m;
       return out;
     };
     cv::Mat1f total = blurred(fixed, true);
@@ -848,7 +856,7 @@ class PixelModel {
   cv::Rect box_;
   cv::Mat1f grey_, fixed_;
   cv::Mat1b use_;
-  std::vector<int> cells_;                       // grid indices of the data cells
+  std::vector<int> cells_;                        // grid indices of the data cells
   std::vector<std::array<Coverage, 4>> squares_;  // per data cell, per position
 };
 
@@ -936,9 +944,9 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     // hull out. Only specks are left out (at most a tenth of the group by the area of
     // their boxes): under motion blur a marker's own pieces lie further apart, and they
     // are much of it.
-    const int largest = int(std::max_element(boxes.begin(), boxes.end(), [](const cv::Rect& a, const cv::Rect& b) {
-                              return a.area() < b.area();
-                            }) - boxes.begin());
+    const int largest = int(std::max_element(boxes.begin(), boxes.end(),
+                                             [](const cv::Rect& a, const cv::Rect& b) { return a.area() < b.area(); }) -
+                            boxes.begin());
     cv::Rect all = boxes[largest];
     for (const cv::Rect& r : boxes) all |= r;
     const int gap = std::max(4, std::max(all.width, all.height) / 10);
@@ -979,7 +987,8 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
     if (quad.size() != 4 || !cv::isContourConvex(quad)) {
       // Rounded corners can take the approximation from five vertices to three: the
       // hull's largest quadrilateral instead.
-      const std::optional<std::array<int, 4>> largest = largest_quad(std::vector<cv::Point2d>(hull.begin(), hull.end()));
+      const std::optional<std::array<int, 4>> largest =
+          largest_quad(std::vector<cv::Point2d>(hull.begin(), hull.end()));
       if (!largest) continue;
       quad.clear();
       for (const int i : *largest) quad.push_back(hull[i]);
@@ -1018,8 +1027,8 @@ void ReadPlaces::add(int n, const cv::Matx33d& homography, const Family& family,
 }
 
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& coarse,
-                                           const Family& family, double min_pixels_per_unit,
-                                           const Deadline& deadline, ReadPlaces* read_places) {
+                                           const Family& family, double min_pixels_per_unit, const Deadline& deadline,
+                                           ReadPlaces* read_places) {
   const int side = family.side();
   // The frame around the coarse outline, with room for the alignment to move and for an
   // outline of the data squares only.
@@ -1048,8 +1057,10 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     return out;
   };
   cv::Mat1f crop;
-  if (per_unit > kTemplateScale) crop = reduced(cv::INTER_LINEAR);
-  else image.mat()(box).convertTo(crop, CV_32F, 1.0 / 255);
+  if (per_unit > kTemplateScale)
+    crop = reduced(cv::INTER_LINEAR);
+  else
+    image.mat()(box).convertTo(crop, CV_32F, 1.0 / 255);
   const double edge_angle = edge_direction(crop);
   if (per_unit < 1) {
     const int enlarge = std::clamp(int(std::ceil(2 / per_unit)), 1, 4);
@@ -1063,7 +1074,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   double sigma = template_blur(per_unit);
   std::optional<BlurredStructure> drawn;
   const BlurredStructure& structure = blurred_structure(family, per_unit, drawn);
-  cv::Mat1f defocused;  // a defocused template that replaces it, see try_defocus
+  cv::Mat1f defocused;                        // a defocused template that replaces it, see try_defocus
   const cv::Mat1f* templ = &structure.image;  // const: its pixels may be the shared table's
   const SparseTemplate& sparse = structure.sparse;
   const cv::Matx33d to_template = unit_to_template();
@@ -1199,7 +1210,8 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     const cv::Matx33f wf = warp_to_crop;
     const float cx = templ->cols / 2.0f, cy = templ->rows / 2.0f;
     const float z = wf(2, 0) * cx + wf(2, 1) * cy + wf(2, 2);
-    const float mx = (wf(0, 0) * cx + wf(0, 1) * cy + wf(0, 2)) / z, my = (wf(1, 0) * cx + wf(1, 1) * cy + wf(1, 2)) / z;
+    const float mx = (wf(0, 0) * cx + wf(0, 1) * cy + wf(0, 2)) / z,
+                my = (wf(1, 0) * cx + wf(1, 1) * cy + wf(1, 2)) / z;
     return cv::Matx22d((wf(0, 0) - mx * wf(2, 0)) / z, (wf(0, 1) - mx * wf(2, 1)) / z, (wf(1, 0) - my * wf(2, 0)) / z,
                        (wf(1, 1) - my * wf(2, 1)) / z);
   };
@@ -1363,8 +1375,8 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // than kMaxSmear, and at 1080p to readings under min_pixels_per_unit, all refused after
   // the reading.
   out.smear = PixelModel::least_smear(smear) / out.pixels_per_unit;
-  if (out.pixels_per_unit < min_pixels_per_unit || out.correlation < kMinCorrelation ||
-      out.contrast < kMinContrast || out.baseline_gap < kMinBaselineGap || out.smear > kMaxSmear)
+  if (out.pixels_per_unit < min_pixels_per_unit || out.correlation < kMinCorrelation || out.contrast < kMinContrast ||
+      out.baseline_gap < kMinBaselineGap || out.smear > kMaxSmear)
     return out;  // margin and marker correlation 0: not acceptable
   if (read_places) {
     std::array<cv::Point2d, 4> corners;
@@ -1453,7 +1465,6 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   out.margin = out.noise_margin = out.evidence = 0;  // the reading never settled
   return out;
 }
-
 
 Stage outline_stage(const OutlineReading& r, const DetectorParams& params) {
   // Measured on the range and blur renders and on marker-free photos (docs/BENCHMARKS.md),

@@ -64,8 +64,8 @@ std::size_t untouched_runs(const std::uint64_t* row, const std::uint64_t* above,
     const std::uint64_t white_above = ~above[i] & valid;
     const std::uint64_t white_above_left = i > 0 ? ~above[i - 1] >> 63 : 0;  // only the last word has padding
     const std::uint64_t white_above_right = i + 1 < wpr ? ~above[i + 1] & valid_bits(w, i + 1) & 1 : 0;
-    const std::uint64_t near_white = white_above | (white_above << 1) | white_above_left | (white_above >> 1) |
-                                     (white_above_right << 63);
+    const std::uint64_t near_white =
+        white_above | (white_above << 1) | white_above_left | (white_above >> 1) | (white_above_right << 63);
     touched += std::size_t(touched_runs(starts[i] & black, black & above[i], carry[0], seed[0]));
     touched += std::size_t(touched_runs(starts[i] & white, white & near_white, carry[1], seed[1]));
   }

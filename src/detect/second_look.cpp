@@ -106,7 +106,8 @@ bool lines_opposite_sides(const RegionTree& tree, int hole) {
   std::vector<int> row_lo(h, g.x1), row_hi(h, g.x0), col_lo(w, g.y1), col_hi(w, g.y0);
   tree.for_each_run(hole, [&](int y, int x0, int x1) {
     row_lo[y - g.y0] = std::min(row_lo[y - g.y0], x0), row_hi[y - g.y0] = std::max(row_hi[y - g.y0], x1 - 1);
-    for (int x = x0; x < x1; ++x) col_lo[x - g.x0] = std::min(col_lo[x - g.x0], y), col_hi[x - g.x0] = std::max(col_hi[x - g.x0], y);
+    for (int x = x0; x < x1; ++x)
+      col_lo[x - g.x0] = std::min(col_lo[x - g.x0], y), col_hi[x - g.x0] = std::max(col_hi[x - g.x0], y);
   });
   int rows = 0, cols = 0;
   for (int y = 0; y < h; ++y) rows += row_lo[y] <= g.x0 + tol && row_hi[y] >= g.x1 - tol;
@@ -163,7 +164,8 @@ int unsought_marker(const RegionTree& tree, int r, const std::bitset<Family::kMa
 }
 
 // How well a cluster's binary image accounts for its grey levels, within the convex hull
-// of its regions (`hull`, frame pixels, within `box`). An edge is a pixel and its right or lower neighbour of the other colour.
+// of its regions (`hull`, frame pixels, within `box`). An edge is a pixel and its right or lower neighbour of the other
+// colour.
 struct BinaryFit {
   // Mid-grey pixels (more than a quarter of the way from the hull's darkest levels to its
   // brightest and back, a fiftieth of the pixels left out at each end for noise) per
@@ -248,8 +250,8 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     if (!g.black || g.area < 2) continue;
     if (g.x1 - g.x0 + 1 > look.max_size || g.y1 - g.y0 + 1 > look.max_size) continue;
     const int unsought = unsought_marker(tree, r, look.sought, max_n);
-    small.push_back({g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count, unsought > max_n,
-                     unsought != 0 && unsought < max_n, r});
+    small.push_back(
+        {g.x0, g.y0, g.x1, g.y1, g.area, 1 + g.child_count, unsought > max_n, unsought != 0 && unsought < max_n, r});
   }
   std::vector<int> parent(small.size());
   std::iota(parent.begin(), parent.end(), 0);
@@ -385,7 +387,9 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
       continue;
     const std::vector<cv::Point> hull = region_hull(tree, {r});
     const double ring = hull_ring_ink(binary, g, hull);
-    if (ring <= 0.25 && !resolved(box, [&] { return hull; }, unsought != 0)) found.emplace_back(ring, box);
+    if (ring <= 0.25 && !resolved(
+                            box, [&] { return hull; }, unsought != 0))
+      found.emplace_back(ring, box);
   }
   // A small marker whose border the threshold broke open (defocus and a steep tilt at
   // about a pixel per unit) has no hole, and its cluster takes in the background's specks

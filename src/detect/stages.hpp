@@ -195,19 +195,19 @@ struct PatchFrame {
 
 struct Blob {
   int region = -1;
-  int area = 0;          // pixels
-  double mass = 0;       // zeroth moment of the inverted grey image over the dilated region
+  int area = 0;             // pixels
+  double mass = 0;          // zeroth moment of the inverted grey image over the dilated region
   double relative_ink = 0;  // mass over what perspective alone gives it (see find_candidates)
-  cv::Point2d centroid;  // image pixels, as observed (distorted)
-  cv::Point2d point;     // undistorted pixels, for geometry
+  cv::Point2d centroid;     // image pixels, as observed (distorted)
+  cv::Point2d point;        // undistorted pixels, for geometry
 };
 
 struct Candidate {
   Family family{3};
   int white_region = -1;
-  double white_area = 0;   // pixels of the white region
-  double white_level = 0;  // upper quartile of the white region's grey levels
-  std::vector<Blob> blobs; // the n^2 largest black children
+  double white_area = 0;    // pixels of the white region
+  double white_level = 0;   // upper quartile of the white region's grey levels
+  std::vector<Blob> blobs;  // the n^2 largest black children
 };
 
 // Topological filtering, vertex estimation and the area constraint. Counts into stats.
@@ -236,12 +236,12 @@ class BlobMeasurer {
 
  private:
   std::vector<std::uint8_t> classes_, to_own_, to_other_;  // per pixel of the blob's window
-  std::vector<int> inside_;                                 // the region and what it encloses
+  std::vector<int> inside_;                                // the region and what it encloses
 };
 
 // ---------------------------------------------------------------- second_look.cpp
 struct SecondLook {
-  int min_size = 6;   // frame pixels, the cluster's longer side
+  int min_size = 6;  // frame pixels, the cluster's longer side
   int max_size = 192;
   int enlarge_below = 64;  // clusters smaller than this are enlarged twice
   // The n x n families sought (bit n): resolved markers of the others are not looked at
@@ -287,30 +287,30 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
 
 // A marker read from the grey levels under its aligned outline.
 struct OutlineReading {
-  bool read = false;             // the cells were read: `id` holds the reading
+  bool read = false;  // the cells were read: `id` holds the reading
   TagId id;
-  cv::Matx33d homography;        // units -> frame pixels (as observed), in the marker's true turn
-  double correlation = 0;        // of the marker's fixed structure with the image (ECC)
-  double marker_correlation = 0; // of the whole marker read, aligned again (ECC)
-  double contrast = 0;           // the white ring's grey level minus the cells' cores' (under
-                                 // a defocus found: as the template's own blur shows them)
-  double margin = 0;             // least, over the data cells, of how much worse the runner-up
-                                 // square position fits than the best: mean squared grey
-                                 // difference per sample over the contrast squared
-  double noise_margin = 0;       // standard deviations of the fit's residuals by which the
-                                 // least certain cell stands from another digit (least of
-                                 // the readings made; see Detection::noise_margin)
-  double evidence = 0;           // least, over the data cells and their other positions, of
-                                 // how much the fit worsens when the square moves there, over
-                                 // how much the model predicts (1: the image shows the whole
-                                 // difference; 0: it lies halfway), under the final alignment
-  double baseline_gap = 0;       // how much more the two baseline corners look like baselines
-                                 // than the other two (0..1 of the contrast)
-  double pixels_per_unit = 0;    // along the most foreshortened direction, at the centre
-  double smear = 0;              // length of the motion blur found, units (0: none)
-  double defocus = 0;            // Gaussian blur found beyond the pixels', units (0: none)
-  bool past_deadline = false;    // cut short by the frame's deadline: not acceptable
-  bool repeated = false;         // aligned where the frame's readings found a marker already: not read
+  cv::Matx33d homography;         // units -> frame pixels (as observed), in the marker's true turn
+  double correlation = 0;         // of the marker's fixed structure with the image (ECC)
+  double marker_correlation = 0;  // of the whole marker read, aligned again (ECC)
+  double contrast = 0;            // the white ring's grey level minus the cells' cores' (under
+                                  // a defocus found: as the template's own blur shows them)
+  double margin = 0;              // least, over the data cells, of how much worse the runner-up
+                                  // square position fits than the best: mean squared grey
+                                  // difference per sample over the contrast squared
+  double noise_margin = 0;        // standard deviations of the fit's residuals by which the
+                                  // least certain cell stands from another digit (least of
+                                  // the readings made; see Detection::noise_margin)
+  double evidence = 0;            // least, over the data cells and their other positions, of
+                                  // how much the fit worsens when the square moves there, over
+                                  // how much the model predicts (1: the image shows the whole
+                                  // difference; 0: it lies halfway), under the final alignment
+  double baseline_gap = 0;        // how much more the two baseline corners look like baselines
+                                  // than the other two (0..1 of the contrast)
+  double pixels_per_unit = 0;     // along the most foreshortened direction, at the centre
+  double smear = 0;               // length of the motion blur found, units (0: none)
+  double defocus = 0;             // Gaussian blur found beyond the pixels', units (0: none)
+  bool past_deadline = false;     // cut short by the frame's deadline: not acceptable
+  bool repeated = false;          // aligned where the frame's readings found a marker already: not read
 };
 
 // Where a frame's outline readings found a marker (the aligned outer corners, frame
@@ -406,16 +406,16 @@ enum class Verdict { resolution, residual, ink, margin, accepted };
 struct Decoding {
   Verdict verdict = Verdict::accepted;
   TagId id;
-  cv::Matx33d homography;           // units -> undistorted pixels
-  std::vector<int> blob_of_cell;    // grid order
-  double error = 0;                 // the paper's decoding error metric
-  double edge_score = 0;            // mean Sobel magnitude along the inner border edge
-  double worst_cell = 0;            // largest distance of a centroid from its cell's position, units
+  cv::Matx33d homography;         // units -> undistorted pixels
+  std::vector<int> blob_of_cell;  // grid order
+  double error = 0;               // the paper's decoding error metric
+  double edge_score = 0;          // mean Sobel magnitude along the inner border edge
+  double worst_cell = 0;          // largest distance of a centroid from its cell's position, units
   // Spread of the squares' ink per unit of design area (largest / smallest) under the
   // homography fitted to all n^2 blobs: about 1 for the marker's true turn, about 2 to 3
   // when the baseline is taken on another side.
   double ink_spread = 0;
-  double noise_margin = 0;          // Detection::noise_margin (filled once every other check passed)
+  double noise_margin = 0;  // Detection::noise_margin (filled once every other check passed)
 };
 
 // Tries the 16 key point hypotheses and returns the best one with its verdict and its ink

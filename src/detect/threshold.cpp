@@ -73,8 +73,7 @@ void slide_columns(std::uint16_t* col, const std::uint8_t* add, const std::uint8
 // The window of pixel x spans x - M/2 .. x + M/2 - 1, as OpenCV anchors an even kernel,
 // and its mean rounds as OpenCV's fixed-point box filter does for a power-of-two area d:
 // (sum + d/2 + 1) >> log2(d).
-void threshold_power_of_two(const cv::Mat& grey, int window, std::uint8_t off, cv::Mat& scratch,
-                            BinaryImage& out) {
+void threshold_power_of_two(const cv::Mat& grey, int window, std::uint8_t off, cv::Mat& scratch, BinaryImage& out) {
   const int w = grey.cols, h = grey.rows, half = window / 2;
   const int padded = w + window - 1;  // the column sums of columns -half .. w + half - 2
   // Two rows of 16-bit lanes (column sums, partial window sums) and one of 8-bit means,

@@ -55,7 +55,7 @@ void label(cv::Mat& image, const std::string& text, const Detection& d, double h
   double top = d.corners[0].y, bottom = d.corners[0].y;
   for (const cv::Point2d& c : d.corners) top = std::min(top, c.y), bottom = std::max(bottom, c.y);
   const int gap = 2 * width + thick + 1;
-  const double below = bottom + gap + size.height;                                   // baseline under the marker
+  const double below = bottom + gap + size.height;                               // baseline under the marker
   const double baseline = below + base < image.rows ? below : top - gap - base;  // else over it
   const int x = std::clamp(cvRound(d.center.x - size.width / 2.0), 0, std::max(0, image.cols - size.width));
   const int y = std::clamp(cvRound(baseline), size.height, std::max(size.height, image.rows - base));

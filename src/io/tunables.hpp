@@ -37,7 +37,7 @@ namespace detail {
 template <auto Field>
 constexpr Tunable field(const char* name, const char* nick, const char* blurb, double min, double max) {
   using T = std::remove_reference_t<decltype(std::declval<DetectorParams&>().*Field)>;
-  const Tunable::Kind kind = std::is_same_v<T, bool>  ? Tunable::Kind::boolean
+  const Tunable::Kind kind = std::is_same_v<T, bool> ? Tunable::Kind::boolean
                              : std::is_integral_v<T> ? Tunable::Kind::integer
                                                      : Tunable::Kind::real;
   return {name,

@@ -2,8 +2,8 @@
 // Printable marker files through cairo: the vector geometry for SVG and PDF, the exact
 // coverage raster for single-marker PNGs, and sheets of many markers on A4 or Letter.
 #include <algorithm>
-#include <cmath>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -78,8 +78,10 @@ class PartFile {
 std::string size_text(double metres) {
   std::ostringstream s;
   s.precision(4);
-  if (metres >= 1.0) s << metres << " m";
-  else s << metres * 1000 << " mm";
+  if (metres >= 1.0)
+    s << metres << " m";
+  else
+    s << metres * 1000 << " mm";
   return s.str();
 }
 
@@ -121,7 +123,8 @@ void draw_marker(cairo_t* cr, const Family& family, TagId id, double unit) {
   cairo_rectangle(cr, b, b, s - 2 * b, s - 2 * b);
   cairo_fill(cr);
   cairo_set_fill_rule(cr, CAIRO_FILL_RULE_WINDING);
-  for (const UnitRect& r : family.black_squares(id)) cairo_rectangle(cr, r.x * unit, r.y * unit, r.width * unit, r.height * unit);
+  for (const UnitRect& r : family.black_squares(id))
+    cairo_rectangle(cr, r.x * unit, r.y * unit, r.width * unit, r.height * unit);
   cairo_fill(cr);
 }
 
@@ -156,8 +159,7 @@ void draw_boxed(cairo_t* cr, const Family& family, TagId id, const PrintOptions&
   cairo_translate(cr, l.margin, l.margin);
   draw_marker(cr, family, id, l.unit);
   cairo_restore(cr);
-  if (o.caption)
-    draw_caption(cr, caption_text(family, id, o.size_m), l.width / 2, l.width + 1.2 * l.font, l.font);
+  if (o.caption) draw_caption(cr, caption_text(family, id, o.size_m), l.width / 2, l.width + 1.2 * l.font, l.font);
 }
 
 Surface vector_surface(Format f, const std::string& path, double w, double h) {
@@ -252,10 +254,11 @@ int write_sheet(const std::string& path, const Family& family, const std::vector
 
   const double px_per_pt = options.dpi / 72.0;
   if (format == Format::png) check_png_side(page_h * px_per_pt);
-  Surface surface = format == Format::png
-                        ? Surface(cairo_image_surface_create(CAIRO_FORMAT_RGB24, int(std::ceil(page_w * px_per_pt - 1e-6)),
-                                                             int(std::ceil(page_h * px_per_pt - 1e-6))))
-                        : vector_surface(format, out.part(), page_w, page_h);
+  Surface surface =
+      format == Format::png
+          ? Surface(cairo_image_surface_create(CAIRO_FORMAT_RGB24, int(std::ceil(page_w * px_per_pt - 1e-6)),
+                                               int(std::ceil(page_h * px_per_pt - 1e-6))))
+          : vector_surface(format, out.part(), page_w, page_h);
   check(cairo_surface_status(surface.get()), path);
   Context cr(cairo_create(surface.get()));
   if (format == Format::png) cairo_scale(cr.get(), px_per_pt, px_per_pt);

@@ -18,16 +18,15 @@ cv::Mat1f overlap_weights(int pixels, int cells, double pixels_per_cell, double 
     const double c0 = origin + j * pixels_per_cell, c1 = c0 + pixels_per_cell;
     const int first = std::max(0, int(std::floor(c0 + 0.5)));
     const int last = std::min(pixels - 1, int(std::ceil(c1 - 0.5)));
-    for (int i = first; i <= last; ++i)
-      w(i, j) = float(std::max(0.0, std::min(c1, i + 0.5) - std::max(c0, i - 0.5)));
+    for (int i = first; i <= last; ++i) w(i, j) = float(std::max(0.0, std::min(c1, i + 0.5) - std::max(c0, i - 0.5)));
   }
   return w;
 }
 
 }  // namespace
 
-cv::Mat1f resample_cells(const cv::Mat1f& cells, cv::Size image_size, double pixels_per_cell,
-                         cv::Point2d origin, float outside) {
+cv::Mat1f resample_cells(const cv::Mat1f& cells, cv::Size image_size, double pixels_per_cell, cv::Point2d origin,
+                         float outside) {
   if (cells.empty()) throw std::invalid_argument("resample_cells: no cells");
   if (image_size.width <= 0 || image_size.height <= 0)
     throw std::invalid_argument("resample_cells: the image size must be positive");

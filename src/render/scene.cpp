@@ -12,8 +12,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "lftag/render.hpp"
 #include "../core/geometry.hpp"
+#include "lftag/render.hpp"
 
 namespace lftag {
 namespace {
@@ -86,8 +86,8 @@ PlaneMap plane_map(const SceneTarget& t) {
   // Plane grid (gx, gy) -> plane metres -> camera: H = [r1 r2 t] * A.
   const double half_w = t.albedo.cols * t.cell_size / 2, half_h = t.albedo.rows * t.cell_size / 2;
   const cv::Matx33d a(t.cell_size, 0, -half_w, 0, t.cell_size, -half_h, 0, 0, 1);
-  const cv::Matx33d h = cv::Matx33d(r(0, 0), r(0, 1), t.tvec[0], r(1, 0), r(1, 1), t.tvec[1], r(2, 0),
-                                    r(2, 1), t.tvec[2]) * a;
+  const cv::Matx33d h =
+      cv::Matx33d(r(0, 0), r(0, 1), t.tvec[0], r(1, 0), r(1, 1), t.tvec[1], r(2, 0), r(2, 1), t.tvec[2]) * a;
   PlaneMap m;
   // H maps a plane point to depth * (x, y, 1), so H^-1 maps a ray to (gx, gy, 1) / depth:
   // the third coordinate is positive exactly in front of the camera.
@@ -143,8 +143,7 @@ cv::Rect footprint(const Camera& cam, const SceneTarget& t, cv::Size size) {
 }
 
 // Draws one target over `image` (albedo), compositing by the covered fraction of each pixel.
-void draw_target(const SceneTarget& t, const cv::Mat2f& rays, int supersample, const cv::Rect& box,
-                 cv::Mat1f& image) {
+void draw_target(const SceneTarget& t, const cv::Mat2f& rays, int supersample, const cv::Rect& box, cv::Mat1f& image) {
   const PlaneMap map = plane_map(t);
   const int ss = supersample;
   const float inv_samples = 1.0f / float(ss * ss);
@@ -298,14 +297,18 @@ void SceneRenderer::fit_background() {
   const int w = params_.camera.width, h = params_.camera.height;
   if (!params_.photo.empty()) {
     cv::Mat grey;
-    if (params_.photo.channels() == 3) cv::cvtColor(params_.photo, grey, cv::COLOR_BGR2GRAY);
-    else if (params_.photo.channels() == 4) cv::cvtColor(params_.photo, grey, cv::COLOR_BGRA2GRAY);
-    else grey = params_.photo;
+    if (params_.photo.channels() == 3)
+      cv::cvtColor(params_.photo, grey, cv::COLOR_BGR2GRAY);
+    else if (params_.photo.channels() == 4)
+      cv::cvtColor(params_.photo, grey, cv::COLOR_BGRA2GRAY);
+    else
+      grey = params_.photo;
     // Scale to cover the frame, then crop the centre.
     const double s = std::max(double(w) / grey.cols, double(h) / grey.rows);
     cv::Mat scaled;
-    cv::resize(grey, scaled, cv::Size(std::max(w, int(std::ceil(grey.cols * s))), std::max(h, int(std::ceil(grey.rows * s)))),
-               0, 0, s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
+    cv::resize(grey, scaled,
+               cv::Size(std::max(w, int(std::ceil(grey.cols * s))), std::max(h, int(std::ceil(grey.rows * s)))), 0, 0,
+               s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
     scaled(cv::Rect((scaled.cols - w) / 2, (scaled.rows - h) / 2, w, h)).convertTo(background_, CV_32F, 1.0 / 255);
   } else {
     background_ = cv::Mat1f(h, w, float(params_.background));

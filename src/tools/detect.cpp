@@ -21,18 +21,34 @@ namespace {
 
 nlohmann::json stats_json(const DetectionStats& s) {
   return {{"funnel",
-           {{"regions", s.regions}, {"topology", s.topology}, {"area", s.area}, {"geometry", s.geometry},
-            {"angle", s.angle}, {"collinearity", s.collinearity}, {"residual", s.residual},
-            {"unambiguous", s.unambiguous}, {"decoded", s.decoded}, {"second_looks", s.second_looks},
+           {{"regions", s.regions},
+            {"topology", s.topology},
+            {"area", s.area},
+            {"geometry", s.geometry},
+            {"angle", s.angle},
+            {"collinearity", s.collinearity},
+            {"residual", s.residual},
+            {"unambiguous", s.unambiguous},
+            {"decoded", s.decoded},
+            {"second_looks", s.second_looks},
             {"second_look_found", s.second_look_found},
-            {"outline_reads", s.outline_reads}, {"outline_found", s.outline_found},
-            {"outline_reads_skipped", s.outline_reads_skipped}, {"skipped_by_budget", s.skipped_by_budget},
-            {"second_looks_skipped", s.second_looks_skipped}, {"past_deadline", s.past_deadline},
+            {"outline_reads", s.outline_reads},
+            {"outline_found", s.outline_found},
+            {"outline_reads_skipped", s.outline_reads_skipped},
+            {"skipped_by_budget", s.skipped_by_budget},
+            {"second_looks_skipped", s.second_looks_skipped},
+            {"past_deadline", s.past_deadline},
             {"skipped_by_deadline", s.skipped_by_deadline}}},
           {"time_ms",
-           {{"threshold", s.threshold_ms}, {"regions", s.regions_ms}, {"candidates", s.candidates_ms},
-            {"keypoints", s.keypoints_ms}, {"hypotheses", s.hypotheses_ms}, {"decode", s.decode_ms},
-            {"pose", s.pose_ms}, {"second_look", s.second_look_ms}, {"total", s.total_ms()}}}};
+           {{"threshold", s.threshold_ms},
+            {"regions", s.regions_ms},
+            {"candidates", s.candidates_ms},
+            {"keypoints", s.keypoints_ms},
+            {"hypotheses", s.hypotheses_ms},
+            {"decode", s.decode_ms},
+            {"pose", s.pose_ms},
+            {"second_look", s.second_look_ms},
+            {"total", s.total_ms()}}}};
 }
 
 // One topological candidate and the stage that stopped it (--why).
@@ -98,17 +114,20 @@ void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
     CLI::Option* option = nullptr;
     switch (t.kind) {
       case io::Tunable::Kind::integer:
-        option = cmd->add_option_function<int>(name, [params, row](int v) { row->set(*params, v); }, t.blurb)
+        option = cmd->add_option_function<int>(
+                        name, [params, row](int v) { row->set(*params, v); }, t.blurb)
                      ->check(CLI::Range(int(t.min), int(t.max)));
         option->default_str(std::to_string(int(initial)));
         break;
       case io::Tunable::Kind::real:
-        option = cmd->add_option_function<double>(name, [params, row](double v) { row->set(*params, v); }, t.blurb)
+        option = cmd->add_option_function<double>(
+                        name, [params, row](double v) { row->set(*params, v); }, t.blurb)
                      ->check(finite_in(t.min, t.max));
         option->default_str(CLI::detail::to_string(initial));
         break;
       case io::Tunable::Kind::boolean:
-        option = cmd->add_option_function<bool>(name, [params, row](bool v) { row->set(*params, v); }, t.blurb);
+        option = cmd->add_option_function<bool>(
+            name, [params, row](bool v) { row->set(*params, v); }, t.blurb);
         option->default_str(initial != 0 ? "true" : "false");
         break;
     }
@@ -127,16 +146,18 @@ void add_detect_command(CLI::App& app, int& status) {
     bool stats = false, why = false;
   };
   auto opt = std::make_shared<Options>();
-  CLI::App* cmd = app.add_subcommand("detect", "Detect markers in images; prints one JSON object per image (JSON Lines).");
+  CLI::App* cmd =
+      app.add_subcommand("detect", "Detect markers in images; prints one JSON object per image (JSON Lines).");
   cmd->add_option("images", opt->images, "Image files (PNG, JPEG and every format OpenCV reads)")->required();
   add_detector_options(cmd, *opt);
   cmd->add_flag("--stats", opt->stats,
                 "Add the candidate funnel (with the candidates and second looks the budget skipped) and "
                 "per-stage times to each object");
-  cmd->add_flag("--why", opt->why,
-                "Add \"candidates\": every topological candidate with the stage that stopped it (area, "
-                "budget, deadline, geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or "
-                "\"detected\"");
+  cmd->add_flag(
+      "--why", opt->why,
+      "Add \"candidates\": every topological candidate with the stage that stopped it (area, "
+      "budget, deadline, geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or "
+      "\"detected\"");
   cmd->add_option("--debug-dir", opt->debug_dir,
                   "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
   cmd->callback([opt, &status] {
@@ -208,10 +229,10 @@ void add_detect_command(CLI::App& app, int& status) {
       std::cerr << "lftag detect: " << total.frames << " images, funnel " << total.topology << " -> " << total.area
                 << " -> " << total.geometry << " -> " << total.angle << " -> " << total.collinearity << " -> "
                 << total.residual << " -> " << total.unambiguous << " -> " << total.decoded << ", mean "
-                << total.total_ms() / std::max<std::int64_t>(1, total.frames) << " ms per image; over budget: "
-                << total.skipped_by_budget << " candidates and " << total.second_looks_skipped
-                << " second looks skipped; past the deadline: " << total.past_deadline << " images, "
-                << total.skipped_by_deadline << " steps skipped\n";
+                << total.total_ms() / std::max<std::int64_t>(1, total.frames)
+                << " ms per image; over budget: " << total.skipped_by_budget << " candidates and "
+                << total.second_looks_skipped << " second looks skipped; past the deadline: " << total.past_deadline
+                << " images, " << total.skipped_by_deadline << " steps skipped\n";
     if (failed) std::cerr << "lftag detect: " << failed << " of " << opt->images.size() << " images failed\n";
     status = failed ? 1 : 0;
   });

@@ -26,11 +26,16 @@ double parse_length(const std::string& text) {
   double scale = 0;
   if (unit.empty())
     throw std::invalid_argument("size '" + text + "' has no unit: give mm, cm, m or in, such as 100mm or 0.1m");
-  if (unit == "mm") scale = 0.001;
-  else if (unit == "cm") scale = 0.01;
-  else if (unit == "m") scale = 1.0;
-  else if (unit == "in") scale = 0.0254;
-  else throw std::invalid_argument("size '" + text + "' has an unknown unit: use mm, cm, m or in");
+  if (unit == "mm")
+    scale = 0.001;
+  else if (unit == "cm")
+    scale = 0.01;
+  else if (unit == "m")
+    scale = 1.0;
+  else if (unit == "in")
+    scale = 0.0254;
+  else
+    throw std::invalid_argument("size '" + text + "' has an unknown unit: use mm, cm, m or in");
   if (!(value > 0) || !std::isfinite(value)) throw std::invalid_argument("size '" + text + "' must be positive");
   return value * scale;
 }
@@ -44,12 +49,15 @@ void add_generate_command(CLI::App& app, int& status) {
     bool no_caption = false, sheet = false;
   };
   auto opt = std::make_shared<Options>();
-  CLI::App* cmd = app.add_subcommand("generate", "Write a printable marker (or a sheet of markers) as SVG, PDF or PNG.");
+  CLI::App* cmd =
+      app.add_subcommand("generate", "Write a printable marker (or a sheet of markers) as SVG, PDF or PNG.");
   cmd->add_option("--family", opt->family, "Marker family: 2x2, 3x3, 4x4, 5x5, 6x6, 7x7 or 8x8")->required();
   cmd->add_option("--id", opt->ids,
                   "Marker id, decimal or 0x-hexadecimal; for a sheet a list with ranges, e.g. 0-11,40 or '0-11, 40'")
       ->required();
-  cmd->add_option("--size", opt->size, "Outer edge of the black border, with its unit (mm, cm, m or in): 100mm, 10cm, 0.1m, 4in (default 100mm)")
+  cmd->add_option(
+         "--size", opt->size,
+         "Outer edge of the black border, with its unit (mm, cm, m or in): 100mm, 10cm, 0.1m, 4in (default 100mm)")
       ->check(CLI::Validator(
           [](std::string& text) -> std::string {
             try {
@@ -91,8 +99,8 @@ void add_generate_command(CLI::App& app, int& status) {
     try {
       if (opt->sheet || ids.size() > 1) {
         const int pages = write_sheet(opt->output, *family, ids, print, paper);
-        std::cerr << "wrote " << ids.size() << " markers on " << pages << " page" << (pages > 1 ? "s" : "")
-                  << " to " << opt->output << "\n";
+        std::cerr << "wrote " << ids.size() << " markers on " << pages << " page" << (pages > 1 ? "s" : "") << " to "
+                  << opt->output << "\n";
       } else {
         write_marker(opt->output, *family, ids.front(), print);
       }

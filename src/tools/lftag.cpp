@@ -7,11 +7,12 @@
 #include "commands.hpp"
 
 int main(int argc, char** argv) {
-  CLI::App app{"LFTag fiducial markers: print them, render test scenes, detect them in images"
+  CLI::App app{
+      "LFTag fiducial markers: print them, render test scenes, detect them in images"
 #ifdef LFTAG_WITH_GST
-               " and videos"
+      " and videos"
 #endif
-               "."};
+      "."};
   app.require_subcommand(1);
   // Our own messages say what went wrong with a file; OpenCV's warnings would repeat it.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);

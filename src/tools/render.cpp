@@ -50,10 +50,16 @@ std::vector<SceneMarker> read_scene(const std::string& path) {
 }
 
 nlohmann::json truth_json(const MarkerTruth& t) {
-  return {{"family", t.family.name()}, {"id", io::id_json(t.id)},      {"tag_size", t.tag_size},
-          {"rvec", io::vec_json(t.rvec)},   {"tvec", io::vec_json(t.tvec)}, {"keypoints", io::points_json(t.keypoints)},
-          {"centers", io::points_json(t.centers)}, {"corners", io::points_json(t.corners)},
-          {"fully_visible", t.fully_visible}, {"edge_px", t.edge_px}};
+  return {{"family", t.family.name()},
+          {"id", io::id_json(t.id)},
+          {"tag_size", t.tag_size},
+          {"rvec", io::vec_json(t.rvec)},
+          {"tvec", io::vec_json(t.tvec)},
+          {"keypoints", io::points_json(t.keypoints)},
+          {"centers", io::points_json(t.centers)},
+          {"corners", io::points_json(t.corners)},
+          {"fully_visible", t.fully_visible},
+          {"edge_px", t.edge_px}};
 }
 
 }  // namespace
@@ -71,17 +77,20 @@ void add_render_command(CLI::App& app, int& status) {
     std::uint64_t seed = 1;
   };
   auto opt = std::make_shared<Options>();
-  CLI::App* cmd = app.add_subcommand(
-      "render", "Render a synthetic camera frame of markers (PNG) with its ground truth (JSON).");
+  CLI::App* cmd =
+      app.add_subcommand("render", "Render a synthetic camera frame of markers (PNG) with its ground truth (JSON).");
   cmd->add_option("--width", opt->width, "Frame width in pixels (default 640)")->check(CLI::PositiveNumber);
   cmd->add_option("--height", opt->height, "Frame height in pixels (default 480)")->check(CLI::PositiveNumber);
-  cmd->add_option("--fx", opt->fx, "Focal length in pixels along x (default 320)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
-  cmd->add_option("--fy", opt->fy, "Focal length in pixels along y (default 320)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
-  cmd->add_option("--cx", opt->cx, "Principal point x (default: frame centre)")->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
-  cmd->add_option("--cy", opt->cy, "Principal point y (default: frame centre)")->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
+  cmd->add_option("--fx", opt->fx, "Focal length in pixels along x (default 320)")
+      ->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
+  cmd->add_option("--fy", opt->fy, "Focal length in pixels along y (default 320)")
+      ->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
+  cmd->add_option("--cx", opt->cx, "Principal point x (default: frame centre)")
+      ->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
+  cmd->add_option("--cy", opt->cy, "Principal point y (default: frame centre)")
+      ->check(finite_in(-Camera::kMaxPrincipal, Camera::kMaxPrincipal));
   cmd->add_option("--distortion", opt->distortion, "Distortion k1,k2,p1,p2[,k3]")->delimiter(',');
-  cmd->add_option("--calibration", opt->calibration,
-                  "OpenCV calibration file (YAML/XML); replaces the camera options");
+  cmd->add_option("--calibration", opt->calibration, "OpenCV calibration file (YAML/XML); replaces the camera options");
   cmd->add_option("--family", opt->family, "Family of the single marker (default 3x3)");
   cmd->add_option("--id", opt->id, "Id of the single marker, decimal or 0x-hexadecimal (default 0)");
   cmd->add_option("--tag-size", opt->tag_size, "Outer edge of the black border in metres (default 1)")
@@ -91,8 +100,10 @@ void add_render_command(CLI::App& app, int& status) {
   cmd->add_option("--x", opt->x, "Sideways offset of the marker centre, m (default 0)")->check(finite_in(-1e6, 1e6));
   cmd->add_option("--y", opt->y, "Downward offset of the marker centre, m (default 0)")->check(finite_in(-1e6, 1e6));
   cmd->add_option("--roll", opt->roll, "In-plane rotation, degrees (default 0)")->check(finite_in(-1e4, 1e4));
-  cmd->add_option("--tilt", opt->tilt, "Rotation about the camera's x axis, degrees (default 0)")->check(finite_in(-1e4, 1e4));
-  cmd->add_option("--pan", opt->pan, "Rotation about the camera's y axis, degrees (default 0)")->check(finite_in(-1e4, 1e4));
+  cmd->add_option("--tilt", opt->tilt, "Rotation about the camera's x axis, degrees (default 0)")
+      ->check(finite_in(-1e4, 1e4));
+  cmd->add_option("--pan", opt->pan, "Rotation about the camera's y axis, degrees (default 0)")
+      ->check(finite_in(-1e4, 1e4));
   cmd->add_option("--margin", opt->margin, "White margin around the marker, whole units (default 2)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--scene", opt->scene,
@@ -150,8 +161,7 @@ void add_render_command(CLI::App& app, int& status) {
       }
       for (SceneMarker& m : markers) m.margin_units = opt->margin;
       const RenderedScene scene = render_scene(p, markers);
-      if (!cv::imwrite(opt->output, scene.image))
-        throw std::runtime_error("cannot write image '" + opt->output + "'");
+      if (!cv::imwrite(opt->output, scene.image)) throw std::runtime_error("cannot write image '" + opt->output + "'");
       std::string truth_path = opt->truth;
       if (truth_path.empty()) {
         const std::size_t dot = opt->output.rfind('.');
@@ -161,7 +171,10 @@ void add_render_command(CLI::App& app, int& status) {
                               {"width", opt->width},
                               {"height", opt->height},
                               {"camera",
-                               {{"fx", p.camera.fx}, {"fy", p.camera.fy}, {"cx", p.camera.cx}, {"cy", p.camera.cy},
+                               {{"fx", p.camera.fx},
+                                {"fy", p.camera.fy},
+                                {"cx", p.camera.cx},
+                                {"cy", p.camera.cy},
                                 {"distortion", p.camera.distortion}}},
                               {"markers", nlohmann::json::array()}};
       for (const MarkerTruth& t : scene.truth) truth["markers"].push_back(truth_json(t));

@@ -361,10 +361,10 @@ std::vector<TrackedMarker> Tracker::update(double time, const std::vector<Detect
     // (a track measured in several frames is hidden by it, and predicted).
     const bool single = track.info.last_seen == track.info.first_seen;
     const bool superseded = single && std::any_of(detections.begin(), detections.end(), [&](const Detection& d) {
-      const std::vector<cv::Point2f> outline(d.corners.begin(), d.corners.end());
-      return (d.family != track.last.family || d.id != track.last.id) &&
-             cv::pointPolygonTest(outline, cv::Point2f(m.detection.center), false) >= 0;
-    });
+                              const std::vector<cv::Point2f> outline(d.corners.begin(), d.corners.end());
+                              return (d.family != track.last.family || d.id != track.last.id) &&
+                                     cv::pointPolygonTest(outline, cv::Point2f(m.detection.center), false) >= 0;
+                            });
     if (superseded || time - track.info.last_seen > params_.lost_after) {
       m = TrackedMarker{track.last, track.info};
       m.track.state = TrackState::lost;

@@ -6,16 +6,15 @@
 
 #include <gst/check/check.h>
 
-#define LFTAG_CHECK_MAIN(name)                          \
-int main (int argc, char **argv)                        \
-{                                                       \
-  gst_check_init (&argc, &argv);                        \
-  SRunner *runner = srunner_create (name ## _suite ()); \
-  srunner_set_tap (runner, "-");                        \
-  srunner_run_all (runner, CK_SILENT);                  \
-  int failed = srunner_ntests_failed (runner);          \
-  srunner_free (runner);                                \
-  return failed == 0 ? 0 : 1;                           \
-}
+#define LFTAG_CHECK_MAIN(name)                        \
+  int main(int argc, char** argv) {                   \
+    gst_check_init(&argc, &argv);                     \
+    SRunner* runner = srunner_create(name##_suite()); \
+    srunner_set_tap(runner, "-");                     \
+    srunner_run_all(runner, CK_SILENT);               \
+    int failed = srunner_ntests_failed(runner);       \
+    srunner_free(runner);                             \
+    return failed == 0 ? 0 : 1;                       \
+  }
 
 #endif /* __LFTAG_CHECK_MAIN_H__ */

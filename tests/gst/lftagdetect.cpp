@@ -243,10 +243,9 @@ GST_END_TEST;
 // ---------------------------------------------------------------------------
 // Formats, sizes, strides
 
-const char* const kFormats[] = {"GRAY8", "I420", "YV12", "NV12", "NV21",      "Y42B",     "Y444",
-                                "RGB",   "BGR",  "RGBx", "BGRx", "xRGB",      "xBGR",     "RGBA",
-                                "BGRA",  "ARGB", "ABGR", "YUY2", "UYVY",      "YVYU",     "I420_10LE",
-                                "P010_10LE"};
+const char* const kFormats[] = {"GRAY8", "I420", "YV12", "NV12", "NV21",      "Y42B",     "Y444", "RGB",
+                                "BGR",   "RGBx", "BGRx", "xRGB", "xBGR",      "RGBA",     "BGRA", "ARGB",
+                                "ABGR",  "YUY2", "UYVY", "YVYU", "I420_10LE", "P010_10LE"};
 
 // The source's frame in each format gives the detections of its GRAY8 frame. RGB
 // carries the grey levels exactly; YUV squeezes them into video range (16..235).
@@ -255,8 +254,7 @@ static void check_formats(int width, int height, const std::vector<const char*>&
   const std::string source = "lftagtestsrc num-buffers=1 count=3 seed=11 noise=2";
   const std::string size = ",width=" + std::to_string(width) + ",height=" + std::to_string(height);
   Frames grey;
-  pull_frames(grey, source + " ! lftagdetect deadline=0 " + properties, ("video/x-raw,format=GRAY8" + size).c_str(),
-              1);
+  pull_frames(grey, source + " ! lftagdetect deadline=0 " + properties, ("video/x-raw,format=GRAY8" + size).c_str(), 1);
   const FrameDetections reference = detections_of(grey.buffers[0]);
   fail_unless(reference.width == width && reference.height == height);
   fail_unless_equals_int(reference.detections.size(), expected);
@@ -518,8 +516,8 @@ GST_START_TEST(test_overlay_composition_meta) {
   GstBuffer* with_upstream = gst_buffer_copy(in);
   GstBuffer* pixels = gst_buffer_new_allocate(nullptr, 16 * 16 * 4, nullptr);
   gst_buffer_add_video_meta(pixels, GST_VIDEO_FRAME_FLAG_NONE, GST_VIDEO_OVERLAY_COMPOSITION_FORMAT_RGB, 16, 16);
-  GstVideoOverlayRectangle* theirs = gst_video_overlay_rectangle_new_raw(pixels, 0, 0, 16, 16,
-                                                                         GST_VIDEO_OVERLAY_FORMAT_FLAG_NONE);
+  GstVideoOverlayRectangle* theirs =
+      gst_video_overlay_rectangle_new_raw(pixels, 0, 0, 16, 16, GST_VIDEO_OVERLAY_FORMAT_FLAG_NONE);
   GstVideoOverlayComposition* upstream = gst_video_overlay_composition_new(theirs);
   gst_buffer_add_video_overlay_composition_meta(with_upstream, upstream);
   GstBuffer* both = gst_harness_push_and_pull(attaching, with_upstream);
@@ -707,10 +705,10 @@ GST_END_TEST;
 // Messages
 
 GST_START_TEST(test_messages) {
-  GstElement* pipeline =
-      gst_parse_launch("lftagtestsrc num-buffers=10 ids=6789,42 ! lftagdetect name=d message-detections=true ! "
-                       "fakesink name=sink",
-                       nullptr);
+  GstElement* pipeline = gst_parse_launch(
+      "lftagtestsrc num-buffers=10 ids=6789,42 ! lftagdetect name=d message-detections=true ! "
+      "fakesink name=sink",
+      nullptr);
   // The meta of every frame, by timestamp, to compare with the messages.
   struct Seen {
     GMutex lock;
@@ -914,8 +912,9 @@ GST_START_TEST(test_message_compact_by_default) {
   gst_object_unref(e);
 
   const auto first = [](const std::string& properties) {
-    std::vector<GstMessage*> messages = run_to_eos(
-        "lftagtestsrc count=4 num-buffers=1 ! lftagdetect deadline=0 " + properties + " ! fakesink", GST_MESSAGE_ELEMENT);
+    std::vector<GstMessage*> messages =
+        run_to_eos("lftagtestsrc count=4 num-buffers=1 ! lftagdetect deadline=0 " + properties + " ! fakesink",
+                   GST_MESSAGE_ELEMENT);
     fail_unless_equals_int(messages.size(), 1);
     GstStructure* s = gst_structure_copy(gst_message_get_structure(messages[0]));
     count_and_free(messages);
@@ -1008,8 +1007,8 @@ GST_START_TEST(test_tunable_properties) {
     switch (t.kind) {
       case lftag::io::Tunable::Kind::integer: {
         const GParamSpecInt* range = G_PARAM_SPEC_INT(spec);
-        fail_unless(range->minimum == t.min && range->maximum == t.max && range->default_value == t.get(defaults),
-                    "%s", t.name);
+        fail_unless(range->minimum == t.min && range->maximum == t.max && range->default_value == t.get(defaults), "%s",
+                    t.name);
         g_object_set(e, t.name, gint(changed), nullptr);
         g_object_get_property(G_OBJECT(e), t.name, &value);
         fail_unless_equals_int(g_value_get_int(&value), gint(changed));
@@ -1017,8 +1016,8 @@ GST_START_TEST(test_tunable_properties) {
       }
       case lftag::io::Tunable::Kind::real: {
         const GParamSpecDouble* range = G_PARAM_SPEC_DOUBLE(spec);
-        fail_unless(range->minimum == t.min && range->maximum == t.max && range->default_value == t.get(defaults),
-                    "%s", t.name);
+        fail_unless(range->minimum == t.min && range->maximum == t.max && range->default_value == t.get(defaults), "%s",
+                    t.name);
         g_object_set(e, t.name, changed, nullptr);
         g_object_get_property(G_OBJECT(e), t.name, &value);
         fail_unless_equals_float(g_value_get_double(&value), changed);
@@ -1370,8 +1369,8 @@ GST_START_TEST(test_camera_not_set) {
     const char* properties;
     double cx, cy;
   };
-  for (const Case& c : {Case{"", 319.5, 239.5}, Case{"cx=0 cy=0", 0, 0}, Case{"cx=0", 0, 239.5},
-                        Case{"cy=0 cx=12.5", 12.5, 0}}) {
+  for (const Case& c :
+       {Case{"", 319.5, 239.5}, Case{"cx=0 cy=0", 0, 0}, Case{"cx=0", 0, 239.5}, Case{"cy=0 cx=12.5", 12.5, 0}}) {
     Frames frames;
     pull_frames(frames,
                 std::string("lftagtestsrc num-buffers=2 count=2 seed=4 ! video/x-raw,width=640,height=480 ! "
@@ -1447,8 +1446,9 @@ GST_START_TEST(test_budget_warning) {
   // Three markers a frame: a budget of one cuts all ten frames, and warns once, naming
   // that budget and not the outline reads' bound, which was not hit.
   fail_unless_equals_int(warnings("max-candidates=1"), 1);
-  for (GstMessage* m : run_to_eos("lftagtestsrc count=3 num-buffers=2 ! lftagdetect max-candidates=1 deadline=0 ! fakesink",
-                                  GST_MESSAGE_WARNING)) {
+  for (GstMessage* m :
+       run_to_eos("lftagtestsrc count=3 num-buffers=2 ! lftagdetect max-candidates=1 deadline=0 ! fakesink",
+                  GST_MESSAGE_WARNING)) {
     GError* error = nullptr;
     gst_message_parse_warning(m, &error, nullptr);
     fail_if(std::string(error->message).find("outline") != std::string::npos, "%s", error->message);
@@ -1498,7 +1498,8 @@ GST_START_TEST(test_outline_bound_warning) {
   cv::Mat1b tile(16 * 8, 16 * 8, std::uint8_t(220));  // 16 cells of 1.5 px, drawn 8 times larger
   cv::rectangle(tile, cv::Rect(0, 0, 12 * 8, 12 * 8), 25, cv::FILLED);
   for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) cv::rectangle(tile, cv::Rect((2 + 4 * c) * 8, (2 + 4 * r) * 8, 16, 16), 220, cv::FILLED);
+    for (int c = 0; c < 3; ++c)
+      cv::rectangle(tile, cv::Rect((2 + 4 * c) * 8, (2 + 4 * r) * 8, 16, 16), 220, cv::FILLED);
   cv::Mat1b big, wall;
   cv::repeat(tile, 30, 54, big);
   cv::resize(big, wall, cv::Size(), 1.5 / 8, 1.5 / 8, cv::INTER_AREA);
@@ -1647,7 +1648,8 @@ GST_START_TEST(test_late_frames) {
   };
   fail_unless(push(0).analysed);
   // The sink reports frame 0 rendered 50 ms late: frames due before pts(0) + 100 ms are late.
-  fail_unless(gst_harness_push_upstream_event(h, gst_event_new_qos(GST_QOS_TYPE_UNDERFLOW, 0.5, 50 * GST_MSECOND, pts(0))));
+  fail_unless(
+      gst_harness_push_upstream_event(h, gst_event_new_qos(GST_QOS_TYPE_UNDERFLOW, 0.5, 50 * GST_MSECOND, pts(0))));
   FrameDetections d = push(1);
   fail_unless(d.analysed);
   fail_unless_equals_int(d.detections.size(), 1);
@@ -1668,7 +1670,8 @@ GST_START_TEST(test_late_frames) {
   gst_message_unref(m);
 
   // On time again (rendered 10 ms early): frame 3 is analysed.
-  fail_unless(gst_harness_push_upstream_event(h, gst_event_new_qos(GST_QOS_TYPE_OVERFLOW, 1.0, -10 * GST_MSECOND, pts(2))));
+  fail_unless(
+      gst_harness_push_upstream_event(h, gst_event_new_qos(GST_QOS_TYPE_OVERFLOW, 1.0, -10 * GST_MSECOND, pts(2))));
   d = push(3);
   fail_unless(d.analysed);
   fail_unless_equals_int(d.detections.size(), 1);
@@ -1686,8 +1689,9 @@ GST_END_TEST;
 // unanalysed and counted in QoS messages.
 GST_START_TEST(test_late_frames_in_a_live_pipeline) {
   for (const char* mode : {"analyse", "skip"}) {
-    const std::string launch = std::string("lftagtestsrc is-live=true num-buffers=20 ! identity sleep-time=80000 ! "
-                                           "lftagdetect name=d late-frames=") +
+    const std::string launch = std::string(
+                                   "lftagtestsrc is-live=true num-buffers=20 ! identity sleep-time=80000 ! "
+                                   "lftagdetect name=d late-frames=") +
                                mode + " ! fakesink name=sink sync=true qos=true";
     GstElement* pipeline = gst_parse_launch(launch.c_str(), nullptr);
     struct Count {
@@ -1742,9 +1746,8 @@ GST_END_TEST;
 // that names it; while playing, a warning names it and the detector keeps its families.
 GST_START_TEST(test_bad_families) {
   const std::pair<const char*, const char*> cases[] = {
-      {"families", "9x9"}, {"families", "3x3,,4x4"}, {"families", "10x10"},
-      {"distortion", "0.1,x,0,0"}, {"distortion", "0.1,0.2,0.3"}, {"distortion", "nan,0,0,0"},
-      {"cx", "-0.5"}, {"cy", "-0.001"}};
+      {"families", "9x9"},           {"families", "3x3,,4x4"},    {"families", "10x10"}, {"distortion", "0.1,x,0,0"},
+      {"distortion", "0.1,0.2,0.3"}, {"distortion", "nan,0,0,0"}, {"cx", "-0.5"},        {"cy", "-0.001"}};
   for (const auto& [property, bad] : cases) {
     const std::string launch = std::string("lftagtestsrc num-buffers=3 ! lftagdetect name=d fx=500 ") + property +
                                "=\"" + bad + "\" ! fakesink";
@@ -1766,8 +1769,8 @@ GST_START_TEST(test_bad_families) {
   }
 
   // A good value after a bad one clears it.
-  GstElement* pipeline =
-      gst_parse_launch("lftagtestsrc is-live=true num-buffers=30 ids=6789 ! lftagdetect name=d families=9x9 ! fakesink", nullptr);
+  GstElement* pipeline = gst_parse_launch(
+      "lftagtestsrc is-live=true num-buffers=30 ids=6789 ! lftagdetect name=d families=9x9 ! fakesink", nullptr);
   GstElement* d = gst_bin_get_by_name(GST_BIN(pipeline), "d");
   g_object_set(d, "families", "3x3", nullptr);
   GstBus* bus = gst_element_get_bus(pipeline);
@@ -1942,7 +1945,8 @@ GST_END_TEST;
 // new track.
 GST_START_TEST(test_tracking_reports_loss) {
   TrackingRun run("messages=on-change tracking=true lost-after=0.25");
-  for (int f = 0; f < 5; ++f) fail_unless_equals_int(run.push({tracked_marker(77, -0.3 + 0.02 * f)}).detections.size(), 1);
+  for (int f = 0; f < 5; ++f)
+    fail_unless_equals_int(run.push({tracked_marker(77, -0.3 + 0.02 * f)}).detections.size(), 1);
   std::vector<GstStructure*> posted = run.messages();
   fail_unless_equals_int(posted.size(), 1);
   free_structures(posted);
@@ -2017,7 +2021,8 @@ GST_START_TEST(test_tracking_full_detection_interval) {
       const Detection& d = found.detections[i];
       const lftag::SceneMarker& m = d.id == lftag::TagId(1234) ? moving : still;
       fail_unless(d.id == m.id, "frame %d: id %s", f, d.id.to_decimal().c_str());
-      fail_unless(found.tracks[i] && found.tracks[i]->state == lftag::TrackState::measured, "frame %d: not measured", f);
+      fail_unless(found.tracks[i] && found.tracks[i]->state == lftag::TrackState::measured, "frame %d: not measured",
+                  f);
       const double off = cv::norm(d.center - lftag::make_truth(run.renderer.params().camera, m).center);
       fail_unless(off < 0.5, "frame %d: centre %.2f px off", f, off);
     }

@@ -20,9 +20,9 @@
 #include <gst/check/gstharness.h>
 #include <nlohmann/json.hpp>
 
+#include "detection_json.hpp"
 #include "errors.hpp"
 #include "frames.hpp"
-#include "detection_json.hpp"
 #include "metaconversion.h"
 // Last: check's macros (fail...) clash with names in the C++ library.
 #include "check-main.h"
@@ -63,8 +63,8 @@ void run_pipeline(const std::string& launch, Run& run) {
         GstBuffer* b = GST_PAD_PROBE_INFO_BUFFER(info);
         const GstStructure* meta = lftag_meta_get_structure(b, LFTAG_META_NAME);
         g_mutex_lock(&run->lock);
-        run->buffers.push_back({GST_BUFFER_PTS(b), GST_BUFFER_DTS(b), GST_BUFFER_DURATION(b),
-                                meta ? gst_structure_copy(meta) : nullptr});
+        run->buffers.push_back(
+            {GST_BUFFER_PTS(b), GST_BUFFER_DTS(b), GST_BUFFER_DURATION(b), meta ? gst_structure_copy(meta) : nullptr});
         g_mutex_unlock(&run->lock);
         return GST_PAD_PROBE_OK;
       },
@@ -149,7 +149,8 @@ void expect_lines_match(const std::vector<nlohmann::json>& lines, const Run& run
     fail_unless(line.at("width") == width && line.at("height") == height);
     gboolean analysed = FALSE;
     gst_structure_get_boolean(seen.meta, LFTAG_META_FIELD_ANALYSED, &analysed);
-    fail_unless(line.at("analysed") == bool(analysed), "frame %d: analysed %s", int(i), line.at("analysed").dump().c_str());
+    fail_unless(line.at("analysed") == bool(analysed), "frame %d: analysed %s", int(i),
+                line.at("analysed").dump().c_str());
     nlohmann::json expected = nlohmann::json::array();
     const GValue* list = gst_structure_get_value(seen.meta, LFTAG_META_FIELD_DETECTIONS);
     for (guint k = 0; k < gst_value_array_get_size(list); ++k)
@@ -221,9 +222,9 @@ GST_START_TEST(test_file_matches_metas) {
   const ScratchDir scratch;
   const std::string path = scratch.path("d.jsonl");
   Run run;
-  run_pipeline("lftagtestsrc num-buffers=12 ids=6789,42 ! lftagdetect ! lftagpublish location=" + path +
-                   " ! fakesink name=sink",
-               run);
+  run_pipeline(
+      "lftagtestsrc num-buffers=12 ids=6789,42 ! lftagdetect ! lftagpublish location=" + path + " ! fakesink name=sink",
+      run);
   const std::vector<nlohmann::json> lines = read_lines(path);
   expect_lines_match(lines, run);
   // Both markers in every frame, as `lftag detect` writes them.
@@ -292,10 +293,11 @@ GST_START_TEST(test_after_encode_and_decode) {
   const ScratchDir scratch;
   const std::string path = scratch.path("coded.jsonl");
   Run run;
-  run_pipeline("lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect ! videoconvert ! vp8enc deadline=1 ! "
-               "lftagpublish location=" + path + ".encoded ! vp8dec ! lftagpublish location=" + path +
-                   " ! fakesink name=sink",
-               run);
+  run_pipeline(
+      "lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect ! videoconvert ! vp8enc deadline=1 ! "
+      "lftagpublish location=" +
+          path + ".encoded ! vp8dec ! lftagpublish location=" + path + " ! fakesink name=sink",
+      run);
   fail_unless_equals_int(read_lines(path + ".encoded").size(), 8);
   const std::vector<nlohmann::json> lines = read_lines(path);
   fail_unless_equals_int(lines.size(), 8);
@@ -304,9 +306,11 @@ GST_START_TEST(test_after_encode_and_decode) {
 
   Run written, read;
   const std::string video = path + ".webm";
-  run_pipeline("lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect ! videoconvert ! vp8enc deadline=1 ! webmmux ! "
-               "filesink name=sink location=" + video,
-               written);
+  run_pipeline(
+      "lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect ! videoconvert ! vp8enc deadline=1 ! webmmux ! "
+      "filesink name=sink location=" +
+          video,
+      written);
   run_pipeline("filesrc location=" + video + " ! matroskademux ! vp8dec ! lftagpublish name=p location=" + path +
                    " ! fakesink name=sink",
                read);
@@ -342,9 +346,11 @@ GST_START_TEST(test_after_crop_and_scale) {
     g_error_free(error);
   }
   Run run;
-  run_pipeline("lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect ! videoscale ! video/x-raw,width=320,height=240 ! "
-               "lftagpublish location=" + path + " ! fakesink name=sink",
-               run);
+  run_pipeline(
+      "lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect ! videoscale ! video/x-raw,width=320,height=240 ! "
+      "lftagpublish location=" +
+          path + " ! fakesink name=sink",
+      run);
   const std::vector<nlohmann::json> lines = read_lines(path);
   expect_lines_match(lines, run);
   for (const nlohmann::json& line : lines) fail_unless(line["width"] == 320 && line["height"] == 240);
@@ -406,8 +412,8 @@ GST_START_TEST(test_write_error_leaves_whole_lines) {
   void (*const handler)(int) = std::signal(SIGXFSZ, SIG_IGN);
   const int limited = setrlimit(RLIMIT_FSIZE, &small);
   const GstStateChangeReturn started = gst_element_set_state(pipeline, GST_STATE_PLAYING);
-  GstMessage* m = gst_bus_timed_pop_filtered(bus, GST_CLOCK_TIME_NONE,
-                                             GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR));
+  GstMessage* m =
+      gst_bus_timed_pop_filtered(bus, GST_CLOCK_TIME_NONE, GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR));
   gst_element_set_state(pipeline, GST_STATE_NULL);
   setrlimit(RLIMIT_FSIZE, &saved);
   std::signal(SIGXFSZ, handler);
@@ -431,9 +437,8 @@ GST_END_TEST;
 
 // No space left: the error says so, with its own code, and which frame is lost.
 GST_START_TEST(test_no_space_left) {
-  GstElement* pipeline =
-      gst_parse_launch("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p location=/dev/full ! fakesink",
-                       nullptr);
+  GstElement* pipeline = gst_parse_launch(
+      "lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p location=/dev/full ! fakesink", nullptr);
   GstBus* bus = gst_element_get_bus(pipeline);
   fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
   const Posted error = parse_error(
@@ -716,7 +721,8 @@ GST_START_TEST(test_every_frame_when_stopped_mid_stream) {
     const ScratchDir scratch;
     const std::string path = scratch.path("stopped.jsonl");
     GstElement* pipeline = gst_parse_launch(("lftagtestsrc is-live=true ids=6789 ! lftagdetect ! lftagpublish "
-                                             "name=p location=" + path + " ! fakesink sync=true")
+                                             "name=p location=" +
+                                             path + " ! fakesink sync=true")
                                                 .c_str(),
                                             nullptr);
     Received received;
@@ -739,8 +745,7 @@ GST_START_TEST(test_every_frame_after_an_error_downstream) {
   const ScratchDir scratch;
   const std::string path = scratch.path("error.jsonl");
   GstElement* pipeline = gst_parse_launch(
-      ("lftagtestsrc ids=6789 ! lftagdetect ! lftagpublish name=p location=" + path + " ! fakesink").c_str(),
-      nullptr);
+      ("lftagtestsrc ids=6789 ! lftagdetect ! lftagpublish name=p location=" + path + " ! fakesink").c_str(), nullptr);
   Received received;
   received.error_at = 7;
   watch_publisher(pipeline, received);
@@ -800,9 +805,9 @@ GST_START_TEST(test_mqtt_needs_libmosquitto) {
   const Posted error =
       start_error("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ! fakesink");
   fail_unless_equals_string(error.source.c_str(), "p");
-  fail_unless(has(error.message, "without MQTT") && has(error.message, "libmosquitto-dev") &&
-                  has(error.message, "target=file"),
-              "%s", error.message.c_str());
+  fail_unless(
+      has(error.message, "without MQTT") && has(error.message, "libmosquitto-dev") && has(error.message, "target=file"),
+      "%s", error.message.c_str());
 }
 GST_END_TEST;
 #endif

@@ -9,8 +9,8 @@
 
 #include <glib/gstdio.h>
 #include <gst/base/gstbasesrc.h>
-#include <sys/stat.h>
 #include <gst/video/video.h>
+#include <sys/stat.h>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -50,10 +50,10 @@ cv::Mat1b grey_of(GstBuffer* buffer, GstVideoInfo* info) {
   GstVideoFrame frame;
   fail_unless(gst_video_frame_map(&frame, info, buffer, GST_MAP_READ));
   fail_unless_equals_int(GST_VIDEO_FRAME_FORMAT(&frame), GST_VIDEO_FORMAT_GRAY8);
-  const cv::Mat1b grey = cv::Mat(GST_VIDEO_FRAME_HEIGHT(&frame), GST_VIDEO_FRAME_WIDTH(&frame), CV_8UC1,
-                                 GST_VIDEO_FRAME_PLANE_DATA(&frame, 0),
-                                 std::size_t(GST_VIDEO_FRAME_PLANE_STRIDE(&frame, 0)))
-                             .clone();
+  const cv::Mat1b grey =
+      cv::Mat(GST_VIDEO_FRAME_HEIGHT(&frame), GST_VIDEO_FRAME_WIDTH(&frame), CV_8UC1,
+              GST_VIDEO_FRAME_PLANE_DATA(&frame, 0), std::size_t(GST_VIDEO_FRAME_PLANE_STRIDE(&frame, 0)))
+          .clone();
   gst_video_frame_unmap(&frame);
   return grey;
 }
@@ -67,8 +67,8 @@ void expect_videoconvert(GstBuffer* buffer, GstVideoInfo* info, GstBuffer* conve
   const GstVideoFormatInfo* f = frame.info.finfo;
   fail_unless_equals_int(GST_VIDEO_FRAME_FORMAT(&frame), GST_VIDEO_FRAME_FORMAT(&reference));
   auto at = [](const GstVideoFrame& fr, guint c, int x, int y) {
-    return int(static_cast<const guint8*>(GST_VIDEO_FRAME_COMP_DATA(&fr, c))[y * GST_VIDEO_FRAME_COMP_STRIDE(&fr, c) +
-                                                                          x * GST_VIDEO_FRAME_COMP_PSTRIDE(&fr, c)]);
+    return int(static_cast<const guint8*>(GST_VIDEO_FRAME_COMP_DATA(
+        &fr, c))[y * GST_VIDEO_FRAME_COMP_STRIDE(&fr, c) + x * GST_VIDEO_FRAME_COMP_PSTRIDE(&fr, c)]);
   };
   // Checked pixel by pixel, reported once: check's assertions are slow.
   std::string problem;
@@ -85,8 +85,8 @@ void expect_videoconvert(GstBuffer* buffer, GstVideoInfo* info, GstBuffer* conve
         else if (GST_VIDEO_FORMAT_INFO_HAS_ALPHA(f) && c == 3 && value != 255)
           problem = "alpha is not opaque";
         if (!problem.empty())
-          problem += " in component " + std::to_string(c) + " at (" + std::to_string(x) + ", " +
-                     std::to_string(y) + "): " + std::to_string(value);
+          problem += " in component " + std::to_string(c) + " at (" + std::to_string(x) + ", " + std::to_string(y) +
+                     "): " + std::to_string(value);
       }
   fail_unless(problem.empty(), "%s: %s", GST_VIDEO_FORMAT_INFO_NAME(f), problem.c_str());
   gst_video_frame_unmap(&reference);
@@ -122,8 +122,7 @@ void check_formats(int width, int height, const std::vector<const char*>& format
 
 }  // namespace
 
-GST_START_TEST(test_default_caps)
-{
+GST_START_TEST(test_default_caps) {
   Frames frames;
   pull_frames(frames, "lftagtestsrc num-buffers=2", nullptr, 2);
   fail_unless_equals_int(GST_VIDEO_INFO_FORMAT(&frames.info), GST_VIDEO_FORMAT_GRAY8);
@@ -142,14 +141,10 @@ GST_START_TEST(test_default_caps)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_every_format)
-{
-  check_formats(160, 120, {std::begin(kFormats), std::end(kFormats)});
-}
+GST_START_TEST(test_every_format) { check_formats(160, 120, {std::begin(kFormats), std::end(kFormats)}); }
 GST_END_TEST;
 
-GST_START_TEST(test_odd_sizes)
-{
+GST_START_TEST(test_odd_sizes) {
   for (const cv::Size size : {cv::Size(1, 1), cv::Size(17, 13), cv::Size(1921, 1081)})
     check_formats(size.width, size.height, {"I420", "NV12", "Y42B", "RGB", "xBGR"});
 }
@@ -161,8 +156,8 @@ GST_END_TEST;
 static void check_long_run(const std::string& family, const std::string& ids_property,
                            const std::vector<std::string>& ids, guint count) {
   const int n_frames = 300;
-  const std::string launch = "lftagtestsrc num-buffers=300 seed=4 family=" + family + " count=" +
-                             std::to_string(count) + (ids_property.empty() ? "" : " ids=" + ids_property);
+  const std::string launch = "lftagtestsrc num-buffers=300 seed=4 family=" + family +
+                             " count=" + std::to_string(count) + (ids_property.empty() ? "" : " ids=" + ids_property);
   GstHarness* h = gst_harness_new_parse(launch.c_str());
   gst_harness_play(h);
 
@@ -191,8 +186,7 @@ static void check_long_run(const std::string& family, const std::string& ids_pro
     fail_unless_equals_int(truth.markers.size(), count);
     if (!ids.empty()) {
       const std::vector<std::string> seen = ids_of(truth);
-      for (guint k = 0; k < count; ++k)
-        fail_unless_equals_string(seen[k].c_str(), ids[k % ids.size()].c_str());
+      for (guint k = 0; k < count; ++k) fail_unless_equals_string(seen[k].c_str(), ids[k % ids.size()].c_str());
     }
 
     GstVideoInfo info;
@@ -218,8 +212,8 @@ static void check_long_run(const std::string& family, const std::string& ids_pro
       fail_unless_equals_int(m.centroids.size(), fam.cell_count());
 
       // Fully visible exactly when every corner is in the frame, and then every point is.
-      const bool corners_in = std::all_of(m.corners.begin(), m.corners.end(),
-                                          [&](const cv::Point2d& p) { return inside(p, cam); });
+      const bool corners_in =
+          std::all_of(m.corners.begin(), m.corners.end(), [&](const cv::Point2d& p) { return inside(p, cam); });
       fail_unless(m.fully_visible == corners_in, "frame %d marker %u: fully-visible is wrong", i, k);
       if (m.fully_visible) {
         for (const auto* list : {&m.keypoints, &m.centers, &m.centroids})
@@ -270,53 +264,43 @@ static void check_long_run(const std::string& family, const std::string& ids_pro
   for (guint k = 0; k < count; ++k) {
     const Motion& mo = motion[k];
     fail_unless(mo.visible >= n_frames * 9 / 10, "marker %u fully visible in only %d frames", k, mo.visible);
-    fail_unless(mo.max_edge >= 2 * mo.min_edge, "marker %u: distance hardly varies (%.0f..%.0f px)", k,
-                mo.min_edge, mo.max_edge);
+    fail_unless(mo.max_edge >= 2 * mo.min_edge, "marker %u: distance hardly varies (%.0f..%.0f px)", k, mo.min_edge,
+                mo.max_edge);
     fail_unless(mo.max_tilt <= 60 && mo.max_tilt >= 15, "marker %u: tilt up to %.0f degrees", k, mo.max_tilt);
     fail_unless(mo.max_roll - mo.min_roll >= 45, "marker %u hardly spins", k);
     fail_unless(mo.max_jump <= 0.03 * std::hypot(640, 480), "marker %u jumps %.1f px", k, mo.max_jump);
   }
 }
 
-GST_START_TEST(test_truth_3x3)
-{
-  check_long_run("3x3", "6789,0,16383", {"6789", "0", "16383"}, 3);
-}
+GST_START_TEST(test_truth_3x3) { check_long_run("3x3", "6789,0,16383", {"6789", "0", "16383"}, 3); }
 GST_END_TEST;
 
-GST_START_TEST(test_truth_4x4_repeating_ids)
-{
-  check_long_run("4x4", "268435455,0x1f2e", {"268435455", "7982"}, 5);
-}
+GST_START_TEST(test_truth_4x4_repeating_ids) { check_long_run("4x4", "268435455,0x1f2e", {"268435455", "7982"}, 5); }
 GST_END_TEST;
 
-GST_START_TEST(test_truth_8x8_random_ids)
-{
-  check_long_run("8x8", "", {}, 1);
-}
+GST_START_TEST(test_truth_8x8_random_ids) { check_long_run("8x8", "", {}, 1); }
 GST_END_TEST;
 
-GST_START_TEST(test_large_ids_exact)
-{
+GST_START_TEST(test_large_ids_exact) {
   Frames frames;
   // 2^100 + 1 and 2^124 - 1 need more than 64 bits.
-  pull_frames(frames, "lftagtestsrc num-buffers=1 family=8x8 ids=1267650600228229401496703205377,"
-              "0xfffffffffffffffffffffffffffffff", nullptr, 1);
+  pull_frames(frames,
+              "lftagtestsrc num-buffers=1 family=8x8 ids=1267650600228229401496703205377,"
+              "0xfffffffffffffffffffffffffffffff",
+              nullptr, 1);
   const GstStructure* s = truth_structure(frames.buffers[0]);
   const GValue* markers = gst_structure_get_value(s, LFTAG_META_FIELD_MARKERS);
   fail_unless_equals_int(gst_value_array_get_size(markers), 2);
   const GstStructure* m0 = gst_value_get_structure(gst_value_array_get_value(markers, 0));
   const GstStructure* m1 = gst_value_get_structure(gst_value_array_get_value(markers, 1));
-  fail_unless_equals_string(gst_structure_get_string(m0, LFTAG_FIELD_ID_STRING),
-                            "1267650600228229401496703205377");
+  fail_unless_equals_string(gst_structure_get_string(m0, LFTAG_FIELD_ID_STRING), "1267650600228229401496703205377");
   fail_unless_equals_string(gst_structure_get_string(m1, LFTAG_FIELD_ID_STRING),
                             "21267647932558653966460912964485513215");
   fail_if(gst_structure_has_field(m0, LFTAG_FIELD_ID), "no 64-bit id field for a 101-bit id");
 }
 GST_END_TEST;
 
-GST_START_TEST(test_random_ids_distinct)
-{
+GST_START_TEST(test_random_ids_distinct) {
   Frames frames;
   pull_frames(frames, "lftagtestsrc num-buffers=1 family=2x2 count=16 seed=9", nullptr, 1);
   std::vector<std::string> ids = ids_of(truth_of(frames.buffers[0]));
@@ -325,8 +309,7 @@ GST_START_TEST(test_random_ids_distinct)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_truth_survives_convert_and_scale)
-{
+GST_START_TEST(test_truth_survives_convert_and_scale) {
   const std::string source = "lftagtestsrc num-buffers=3 count=2 seed=21";
   Frames direct, scaled;
   pull_frames(direct, source, nullptr, 3);
@@ -342,8 +325,7 @@ GST_START_TEST(test_truth_survives_convert_and_scale)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_deterministic)
-{
+GST_START_TEST(test_deterministic) {
   const std::string launch = "lftagtestsrc num-buffers=6 count=3 noise=5 motion-blur=0.6 background=gradient";
   Frames a, b, c;
   pull_frames(a, launch + " seed=7", nullptr, 6);
@@ -361,8 +343,7 @@ GST_START_TEST(test_deterministic)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_blur_and_noise)
-{
+GST_START_TEST(test_blur_and_noise) {
   const std::string launch = "lftagtestsrc num-buffers=10 count=4 seed=5 speed=4";
   Frames sharp, blurred, noisy;
   pull_frames(sharp, launch, nullptr, 10);
@@ -391,13 +372,12 @@ GST_START_TEST(test_blur_and_noise)
     fail_unless(std::abs(sigma[0] - 8) < 0.5 && std::abs(mean[0]) < 0.75, "noise sigma %.2f mean %.2f", sigma[0],
                 mean[0]);
   }
-  fail_unless(blurred_edges < 0.8 * sharp_edges, "motion blur did not soften the edges (%.3g vs %.3g)",
-              blurred_edges, sharp_edges);
+  fail_unless(blurred_edges < 0.8 * sharp_edges, "motion blur did not soften the edges (%.3g vs %.3g)", blurred_edges,
+              sharp_edges);
 }
 GST_END_TEST;
 
-GST_START_TEST(test_speed)
-{
+GST_START_TEST(test_speed) {
   Frames still, normal, fast;
   pull_frames(still, "lftagtestsrc num-buffers=5 count=2 speed=0", nullptr, 5);
   pull_frames(normal, "lftagtestsrc num-buffers=9 count=2", nullptr, 9);
@@ -408,8 +388,7 @@ GST_START_TEST(test_speed)
     // Twice the speed: frame i is where frame 2i was (up to the nanoseconds of timestamps).
     const FrameTruth a = truth_of(fast.buffers[i]), b = truth_of(normal.buffers[2 * i]);
     for (int k = 0; k < 2; ++k)
-      for (int j = 0; j < 4; ++j)
-        fail_unless(cv::norm(a.markers[k].corners[j] - b.markers[k].corners[j]) < 1e-4);
+      for (int j = 0; j < 4; ++j) fail_unless(cv::norm(a.markers[k].corners[j] - b.markers[k].corners[j]) < 1e-4);
   }
   fail_if(gst_structure_is_equal(truth_structure(normal.buffers[0]), truth_structure(normal.buffers[1])),
           "speed=1 does not move");
@@ -424,8 +403,7 @@ static GstMessage* pop_message(GstElement* pipeline, GstMessageType types) {
   return message;
 }
 
-GST_START_TEST(test_seek)
-{
+GST_START_TEST(test_seek) {
   Frames unseeked;
   pull_frames(unseeked, "lftagtestsrc num-buffers=61 count=2 seed=3 noise=2", nullptr, 61);
 
@@ -499,12 +477,13 @@ static GstElement* logged_pipeline(const char* launch, FrameLog* log) {
   return pipeline;
 }
 
-GST_START_TEST(test_live)
-{
+GST_START_TEST(test_live) {
   FrameLog log;
-  GstElement* pipeline = logged_pipeline("lftagtestsrc name=src is-live=true num-buffers=4 ! "
-                                         "video/x-raw,width=160,height=120,framerate=30/1 ! "
-                                         "fakesink name=sink sync=true", &log);
+  GstElement* pipeline = logged_pipeline(
+      "lftagtestsrc name=src is-live=true num-buffers=4 ! "
+      "video/x-raw,width=160,height=120,framerate=30/1 ! "
+      "fakesink name=sink sync=true",
+      &log);
   GstElement* src = gst_bin_get_by_name(GST_BIN(pipeline), "src");
   fail_unless(gst_base_src_is_live(GST_BASE_SRC(src)));
   // A live source does not preroll.
@@ -533,8 +512,7 @@ GST_START_TEST(test_live)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_bad_property_values)
-{
+GST_START_TEST(test_bad_property_values) {
   GstElement* src = gst_element_factory_make("lftagtestsrc", nullptr);
   fail_unless(src != nullptr);
   g_object_set(src, "ids", "5,0x10", "count", 2u, "noise", 1.5, nullptr);
@@ -589,16 +567,15 @@ static void expect_error(const std::string& launch, const char* needle, GQuark d
   GError* error = nullptr;
   gst_message_parse_error(message, &error, nullptr);
   fail_unless(error->domain == domain, "'%s': unexpected error domain", error->message);
-  fail_unless(std::string(error->message).find(needle) != std::string::npos, "'%s' does not name '%s'",
-              error->message, needle);
+  fail_unless(std::string(error->message).find(needle) != std::string::npos, "'%s' does not name '%s'", error->message,
+              needle);
   g_error_free(error);
   gst_message_unref(message);
   gst_element_set_state(pipeline, GST_STATE_NULL);
   gst_object_unref(pipeline);
 }
 
-GST_START_TEST(test_bad_settings_fail_the_start)
-{
+GST_START_TEST(test_bad_settings_fail_the_start) {
   const std::string data = LFTAG_TEST_DATA;
   const GQuark resource = GST_RESOURCE_ERROR, core = GST_CORE_ERROR;
   expect_error("lftagtestsrc ids=16384 ! fakesink", "16384", resource);
@@ -606,8 +583,7 @@ GST_START_TEST(test_bad_settings_fail_the_start)
   // Ids that cannot be read, set before the start (no bus yet): the start fails naming them.
   expect_error("lftagtestsrc ids=12,abc ! fakesink", "\"12,abc\"", resource);
   expect_error("lftagtestsrc ids=9-3 ! fakesink", "\"9-3\"", resource);
-  expect_error("lftagtestsrc calibration-file=/nonexistent/camera.yml ! fakesink", "/nonexistent/camera.yml",
-               resource);
+  expect_error("lftagtestsrc calibration-file=/nonexistent/camera.yml ! fakesink", "/nonexistent/camera.yml", resource);
   expect_error("lftagtestsrc calibration-file=" + data + "/malformed.yml ! fakesink", "malformed.yml", resource);
   expect_error("lftagtestsrc calibration-file=" + data + "/no_matrix.yml ! fakesink", "camera_matrix", resource);
   expect_error("lftagtestsrc calibration-file=" + data + "/nul_byte.xml ! fakesink", "nul_byte.xml", resource);
@@ -627,21 +603,20 @@ GST_START_TEST(test_bad_settings_fail_the_start)
   jpeg.append(4100, '\xFF');
   jpeg += std::string("\xFF\xC0\x00\x0B\x08\x80\x00\x80\x00\x01\x01\x11\x00", 13);
   fail_unless(g_file_set_contents(filled.c_str(), jpeg.data(), gssize(jpeg.size()), nullptr));
-  expect_error("lftagtestsrc background=photo background-location=" + filled + " ! fakesink", "32768x32768",
-               resource);
+  expect_error("lftagtestsrc background=photo background-location=" + filled + " ! fakesink", "32768x32768", resource);
   g_unlink(fifo.c_str());
   g_unlink(filled.c_str());
   g_rmdir(dir);
   g_free(dir);
   // A calibration for 640x480 cannot describe a 16:9 frame.
-  expect_error("lftagtestsrc calibration-file=" + data + "/opencv_sample.yml ! "
-               "video/x-raw,width=1280,height=720 ! fakesink",
+  expect_error("lftagtestsrc calibration-file=" + data +
+                   "/opencv_sample.yml ! "
+                   "video/x-raw,width=1280,height=720 ! fakesink",
                "640x480", core);
 }
 GST_END_TEST;
 
-GST_START_TEST(test_calibration_file)
-{
+GST_START_TEST(test_calibration_file) {
   const std::string data = LFTAG_TEST_DATA;
   Frames own, scaled, xml;
   // The calibration's frame size is the default; another size of its shape scales it.
@@ -662,8 +637,7 @@ GST_START_TEST(test_calibration_file)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_camera_properties)
-{
+GST_START_TEST(test_camera_properties) {
   Frames frames;
   pull_frames(frames, "lftagtestsrc num-buffers=1 fx=500 cy=200", "video/x-raw,width=320,height=240", 1);
   const FrameTruth truth = truth_of(frames.buffers[0]);
@@ -674,8 +648,7 @@ GST_END_TEST;
 
 // "Not set" is a value no camera has (fx, fy 0; cx, cy -1), so a principal point of 0
 // is 0, never the frame centre; between -1 and 0 is refused, naming the value.
-GST_START_TEST(test_camera_not_set)
-{
+GST_START_TEST(test_camera_not_set) {
   GstElement* src = gst_element_factory_make("lftagtestsrc", nullptr);
   double fx = -2, fy = -2, cx = -2, cy = -2;
   g_object_get(src, "fx", &fx, "fy", &fy, "cx", &cx, "cy", &cy, nullptr);
@@ -725,11 +698,12 @@ static void wait_for(Done done, const char* what) {
   fail_unless(done(), "%s never happened", what);
 }
 
-GST_START_TEST(test_changes_while_playing)
-{
+GST_START_TEST(test_changes_while_playing) {
   FrameLog log;
-  GstElement* pipeline = logged_pipeline("lftagtestsrc name=src ids=1,2 ! video/x-raw,width=160,height=120 ! "
-                                         "fakesink name=sink sync=false", &log);
+  GstElement* pipeline = logged_pipeline(
+      "lftagtestsrc name=src ids=1,2 ! video/x-raw,width=160,height=120 ! "
+      "fakesink name=sink sync=false",
+      &log);
   GstElement* src = gst_bin_get_by_name(GST_BIN(pipeline), "src");
   fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
 
@@ -760,8 +734,11 @@ GST_START_TEST(test_changes_while_playing)
   for (const char* name : {"speed", "calibration-file"}) {
     warning = pop_message(pipeline, GST_MESSAGE_WARNING);
     gst_message_parse_warning(warning, &error, nullptr);
-    fail_unless(std::string(error->message).find(std::string("\"") + name + "\" can only change in the NULL or READY "
-                                                 "state, not in PLAYING") != std::string::npos, "%s", error->message);
+    fail_unless(std::string(error->message)
+                        .find(std::string("\"") + name +
+                              "\" can only change in the NULL or READY "
+                              "state, not in PLAYING") != std::string::npos,
+                "%s", error->message);
     g_error_free(error);
     gst_message_unref(warning);
   }

@@ -117,8 +117,7 @@ const GstStructure* item(const GstStructure* s, const char* field, guint i) {
 
 }  // namespace
 
-GST_START_TEST(test_registration)
-{
+GST_START_TEST(test_registration) {
   for (const GstMetaInfo* info : {lftag::gst::detection_meta_info(), lftag::gst::truth_meta_info()}) {
     fail_unless(info != nullptr);
     fail_unless(gst_meta_info_is_custom(info));
@@ -139,8 +138,7 @@ GST_START_TEST(test_registration)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_detections_round_trip)
-{
+GST_START_TEST(test_detections_round_trip) {
   GstBuffer* buffer = gst_buffer_new();
   const std::vector<Detection> detections = some_detections();
   lftag::gst::add_detection_meta(buffer, 1920, 1080, detections);
@@ -156,8 +154,7 @@ GST_START_TEST(test_detections_round_trip)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_track_fields_round_trip)
-{
+GST_START_TEST(test_track_fields_round_trip) {
   GstBuffer* buffer = gst_buffer_new();
   const std::vector<Detection> detections = some_detections();
   std::vector<lftag::TrackInfo> tracks(detections.size());
@@ -185,7 +182,8 @@ GST_START_TEST(test_track_fields_round_trip)
     fail_unless(t.state == tracks[i].state && t.flipped == tracks[i].flipped && t.smoothed == tracks[i].smoothed);
     fail_unless(t.first_seen == tracks[i].first_seen && t.last_seen == tracks[i].last_seen);
     fail_unless(std::abs(t.age() - tracks[i].age()) < 1e-12);
-    if (t.smoothed) fail_unless(t.smoothed_rvec == tracks[i].smoothed_rvec && t.smoothed_tvec == tracks[i].smoothed_tvec);
+    if (t.smoothed)
+      fail_unless(t.smoothed_rvec == tracks[i].smoothed_rvec && t.smoothed_tvec == tracks[i].smoothed_tvec);
   }
   gst_buffer_unref(buffer);
 
@@ -193,7 +191,8 @@ GST_START_TEST(test_track_fields_round_trip)
   buffer = gst_buffer_new();
   lftag::gst::add_detection_meta(buffer, 640, 480, detections);
   const GstStructure* s = lftag_meta_get_structure(buffer, LFTAG_META_NAME);
-  const GstStructure* first = gst_value_get_structure(gst_value_array_get_value(gst_structure_get_value(s, "detections"), 0));
+  const GstStructure* first =
+      gst_value_get_structure(gst_value_array_get_value(gst_structure_get_value(s, "detections"), 0));
   fail_if(gst_structure_has_field(first, LFTAG_FIELD_TRACK_ID));
   const auto plain = lftag::gst::read_detection_meta(buffer);
   for (const auto& t : plain->tracks) fail_if(t.has_value());
@@ -201,8 +200,7 @@ GST_START_TEST(test_track_fields_round_trip)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_id_fields)
-{
+GST_START_TEST(test_id_fields) {
   GstBuffer* buffer = gst_buffer_new();
   lftag::gst::add_detection_meta(buffer, 640, 480, some_detections());
   const GstStructure* s = meta_structure(buffer, LFTAG_META_NAME);
@@ -227,8 +225,7 @@ GST_START_TEST(test_id_fields)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_truth_round_trip)
-{
+GST_START_TEST(test_truth_round_trip) {
   const Camera camera = some_camera();
   const std::vector<MarkerTruth> truth = some_truth(camera);
   fail_unless(truth[0].fully_visible && !truth[1].fully_visible);
@@ -258,8 +255,7 @@ GST_START_TEST(test_truth_round_trip)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_public_helpers)
-{
+GST_START_TEST(test_public_helpers) {
   GstBuffer* buffer = gst_buffer_new();
   fail_unless(lftag_meta_get_structure(buffer, LFTAG_META_NAME) == nullptr);
   const std::vector<Detection> detections = some_detections();
@@ -280,8 +276,7 @@ GST_START_TEST(test_public_helpers)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_copies_and_text)
-{
+GST_START_TEST(test_copies_and_text) {
   GstBuffer* buffer = gst_buffer_new();
   const Camera camera = some_camera();
   const std::vector<MarkerTruth> truth = some_truth(camera);
@@ -298,8 +293,7 @@ GST_START_TEST(test_copies_and_text)
   GstStructure* parsed = gst_structure_from_string(text, nullptr);
   fail_unless(parsed != nullptr, "cannot parse %s", text);
   GstBuffer* reparsed = gst_buffer_new();
-  GstStructure* target =
-      gst_custom_meta_get_structure(gst_buffer_add_custom_meta(reparsed, LFTAG_TRUTH_META_NAME));
+  GstStructure* target = gst_custom_meta_get_structure(gst_buffer_add_custom_meta(reparsed, LFTAG_TRUTH_META_NAME));
   gst_structure_foreach(
       parsed,
       [](GQuark field, const GValue* value, gpointer target) -> gboolean {
@@ -319,14 +313,12 @@ GST_START_TEST(test_copies_and_text)
 }
 GST_END_TEST;
 
-GST_START_TEST(test_malformed_rejected)
-{
+GST_START_TEST(test_malformed_rejected) {
   auto rejects = [](GstStructure* s, const char* field) {
     try {
       lftag::gst::detection_from_structure(s);
     } catch (const std::invalid_argument& e) {
-      fail_unless(std::string(e.what()).find(field) != std::string::npos, "'%s' does not name %s", e.what(),
-                  field);
+      fail_unless(std::string(e.what()).find(field) != std::string::npos, "'%s' does not name %s", e.what(), field);
       gst_structure_free(s);
       return;
     }
@@ -360,8 +352,7 @@ GST_END_TEST;
 // The detection meta's transform: a copy is the same meta; a scale moves every point
 // edge to edge and sets the frame size, leaving poses alone; another transform, or a
 // scale of a meta that cannot be read, copies nothing.
-GST_START_TEST(test_detection_meta_transform)
-{
+GST_START_TEST(test_detection_meta_transform) {
   GstBuffer* in = gst_buffer_new();
   const std::vector<Detection> detections = some_detections();
   lftag::gst::add_detection_meta(in, 1920, 1080, detections);

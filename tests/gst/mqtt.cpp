@@ -339,9 +339,9 @@ GST_START_TEST(test_settings_that_cannot_work) {
       {"password=secret", "needs a username"},
   };
   for (const Case& c : cases) {
-    const Posted error = start_error(
-        std::string("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ") + c.properties +
-        " ! fakesink");
+    const Posted error =
+        start_error(std::string("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ") +
+                    c.properties + " ! fakesink");
     fail_unless_equals_string(error.source.c_str(), "p");
     fail_unless(error.message.find(c.says) != std::string::npos, "%s: %s", c.properties, error.message.c_str());
   }

@@ -39,8 +39,8 @@ double resident_mb() {
 
 std::string launch_line(const Options& o, long frames) {
   return "lftagtestsrc num-buffers=" + std::to_string(frames) +
-         " count=4 ids=6789,42,0x1f2e,1000 speed=2 ! video/x-raw,format=I420,width=" +
-         std::to_string(o.width) + ",height=" + std::to_string(o.height) +
+         " count=4 ids=6789,42,0x1f2e,1000 speed=2 ! video/x-raw,format=I420,width=" + std::to_string(o.width) +
+         ",height=" + std::to_string(o.height) +
          " ! lftagdetect families=3x3,4x4 overlay=outline+id+axes fx=" + std::to_string(o.width) +
          " ! fakesink name=sink sync=false";
 }
@@ -52,8 +52,8 @@ bool run_to_eos(GstElement* pipeline) {
     return false;
   }
   GstBus* bus = gst_element_get_bus(pipeline);
-  GstMessage* m = gst_bus_timed_pop_filtered(bus, GST_CLOCK_TIME_NONE,
-                                             GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR));
+  GstMessage* m =
+      gst_bus_timed_pop_filtered(bus, GST_CLOCK_TIME_NONE, GstMessageType(GST_MESSAGE_EOS | GST_MESSAGE_ERROR));
   bool ok = GST_MESSAGE_TYPE(m) == GST_MESSAGE_EOS;
   if (!ok) {
     GError* error = nullptr;
@@ -127,10 +127,11 @@ bool soak_frames(const Options& o) {
     if (frame % (count.every * 10) == 0) std::printf("%7ld  %.1f\n", frame, resident);
   }
   const double growth = mb.size() >= 2 ? growth_after_warm_up(mb) : 0;
-  std::printf("%ld frames %dx%d in %.0f s (%.0f fps), %ld with LFTagMeta, %.2f markers a frame; "
-              "memory after warm-up %+.1f MB (bound %.1f)\n",
-              count.frames.load(), o.width, o.height, seconds, count.frames / seconds, count.with_meta.load(),
-              double(count.detections) / std::max(1L, count.frames.load()), growth, o.max_growth_mb);
+  std::printf(
+      "%ld frames %dx%d in %.0f s (%.0f fps), %ld with LFTagMeta, %.2f markers a frame; "
+      "memory after warm-up %+.1f MB (bound %.1f)\n",
+      count.frames.load(), o.width, o.height, seconds, count.frames / seconds, count.with_meta.load(),
+      double(count.detections) / std::max(1L, count.frames.load()), growth, o.max_growth_mb);
   bool pass = ok;
   if (count.frames != o.frames || count.with_meta != o.frames) {
     std::fprintf(stderr, "soak: %ld of %ld frames came out, %ld with a meta\n", count.frames.load(), o.frames,
@@ -167,8 +168,8 @@ bool soak_state_cycles(const Options& o) {
     if ((i + 1) % std::max(1L, o.cycles / 100) == 0) mb.push_back(resident_mb());
   }
   const double growth = mb.size() >= 2 ? growth_after_warm_up(mb) : 0;
-  std::printf("%ld NULL -> PLAYING -> NULL cycles in %.0f s; memory after warm-up %+.1f MB (bound %.1f)\n",
-              o.cycles, double(g_get_monotonic_time() - start) / 1e6, growth, o.max_growth_mb);
+  std::printf("%ld NULL -> PLAYING -> NULL cycles in %.0f s; memory after warm-up %+.1f MB (bound %.1f)\n", o.cycles,
+              double(g_get_monotonic_time() - start) / 1e6, growth, o.max_growth_mb);
   if (growth > o.max_growth_mb) {
     std::fprintf(stderr, "soak: memory grew %.1f MB over the state cycles\n", growth);
     return false;
@@ -182,12 +183,18 @@ bool parse(int argc, char** argv, Options& o) {
     char* end = nullptr;
     const double v = std::strtod(argv[i + 1], &end);
     if (*end || !(v >= 0 && v <= 1e9)) return false;
-    if (name == "--frames") o.frames = long(v);
-    else if (name == "--cycles") o.cycles = long(v);
-    else if (name == "--width") o.width = int(v);
-    else if (name == "--height") o.height = int(v);
-    else if (name == "--max-growth-mb") o.max_growth_mb = v;
-    else return false;
+    if (name == "--frames")
+      o.frames = long(v);
+    else if (name == "--cycles")
+      o.cycles = long(v);
+    else if (name == "--width")
+      o.width = int(v);
+    else if (name == "--height")
+      o.height = int(v);
+    else if (name == "--max-growth-mb")
+      o.max_growth_mb = v;
+    else
+      return false;
   }
   return argc % 2 == 1 && o.width >= 16 && o.height >= 16;
 }

@@ -65,10 +65,10 @@ GST_START_TEST(test_detect_properties_from_another_thread) {
     const int messages = i % 2 ? GST_LFTAG_DETECT_MESSAGES_WITH_MARKERS : GST_LFTAG_DETECT_MESSAGES_NONE;
     g_object_set(d, "families", i % 2 ? "3x3" : "4x4,3x3,6x6", "tag-size", 0.05 + 0.01 * (i % 7), "threshold-window",
                  12 + i % 9, "threshold-offset", i % 6, "second-look", gboolean(i % 3 != 0), "messages", messages,
-                 "max-ink-ratio", 4.0 + i % 3, "min-spread-ratio", 0.05 + 0.01 * (i % 5),
-                 "max-decode-error", i % 4 ? 0.0 : 1e-3, "max-cell-residual", 0.3 + 0.01 * (i % 5), "fx",
-                 i % 5 ? 0.0 : 300.0 + i % 50, "fy", i % 5 ? 0.0 : 310.0, "cx", i % 5 ? -1.0 : 159.5, "cy",
-                 i % 5 ? -1.0 : 119.5, "distortion", i % 4 == 1 ? "-0.1,0.01,0,0" : "", nullptr);
+                 "max-ink-ratio", 4.0 + i % 3, "min-spread-ratio", 0.05 + 0.01 * (i % 5), "max-decode-error",
+                 i % 4 ? 0.0 : 1e-3, "max-cell-residual", 0.3 + 0.01 * (i % 5), "fx", i % 5 ? 0.0 : 300.0 + i % 50,
+                 "fy", i % 5 ? 0.0 : 310.0, "cx", i % 5 ? -1.0 : 159.5, "cy", i % 5 ? -1.0 : 119.5, "distortion",
+                 i % 4 == 1 ? "-0.1,0.01,0,0" : "", nullptr);
     gst_util_set_object_arg(G_OBJECT(d), "overlay", i % 3 ? "outline+id+axes" : "0");
     gchar* families = nullptr;
     g_object_get(d, "families", &families, nullptr);  // reading back races with nothing either

@@ -12,81 +12,63 @@
 #include <sanitizer/tsan_interface.h>
 
 /* The real function, looked up once (atomically: the first calls may come at once). */
-#define REAL(name)                                                          \
-  static __typeof__ (&name) real_##name##_p;                                \
-  __typeof__ (&name) real_##name = __atomic_load_n (&real_##name##_p, __ATOMIC_ACQUIRE); \
-  if (!real_##name) {                                                       \
-    real_##name = (__typeof__ (&name)) dlsym (RTLD_NEXT, #name);            \
-    __atomic_store_n (&real_##name##_p, real_##name, __ATOMIC_RELEASE);     \
+#define REAL(name)                                                                     \
+  static __typeof__(&name) real_##name##_p;                                            \
+  __typeof__(&name) real_##name = __atomic_load_n(&real_##name##_p, __ATOMIC_ACQUIRE); \
+  if (!real_##name) {                                                                  \
+    real_##name = (__typeof__(&name))dlsym(RTLD_NEXT, #name);                          \
+    __atomic_store_n(&real_##name##_p, real_##name, __ATOMIC_RELEASE);                 \
   }
 
-void
-g_mutex_lock (GMutex * mutex)
-{
-  REAL (g_mutex_lock);
-  real_g_mutex_lock (mutex);
-  __tsan_acquire (mutex);
+void g_mutex_lock(GMutex* mutex) {
+  REAL(g_mutex_lock);
+  real_g_mutex_lock(mutex);
+  __tsan_acquire(mutex);
 }
 
-gboolean
-g_mutex_trylock (GMutex * mutex)
-{
-  REAL (g_mutex_trylock);
-  gboolean locked = real_g_mutex_trylock (mutex);
-  if (locked)
-    __tsan_acquire (mutex);
+gboolean g_mutex_trylock(GMutex* mutex) {
+  REAL(g_mutex_trylock);
+  gboolean locked = real_g_mutex_trylock(mutex);
+  if (locked) __tsan_acquire(mutex);
   return locked;
 }
 
-void
-g_mutex_unlock (GMutex * mutex)
-{
-  REAL (g_mutex_unlock);
-  __tsan_release (mutex);
-  real_g_mutex_unlock (mutex);
+void g_mutex_unlock(GMutex* mutex) {
+  REAL(g_mutex_unlock);
+  __tsan_release(mutex);
+  real_g_mutex_unlock(mutex);
 }
 
-void
-g_rec_mutex_lock (GRecMutex * mutex)
-{
-  REAL (g_rec_mutex_lock);
-  real_g_rec_mutex_lock (mutex);
-  __tsan_acquire (mutex);
+void g_rec_mutex_lock(GRecMutex* mutex) {
+  REAL(g_rec_mutex_lock);
+  real_g_rec_mutex_lock(mutex);
+  __tsan_acquire(mutex);
 }
 
-gboolean
-g_rec_mutex_trylock (GRecMutex * mutex)
-{
-  REAL (g_rec_mutex_trylock);
-  gboolean locked = real_g_rec_mutex_trylock (mutex);
-  if (locked)
-    __tsan_acquire (mutex);
+gboolean g_rec_mutex_trylock(GRecMutex* mutex) {
+  REAL(g_rec_mutex_trylock);
+  gboolean locked = real_g_rec_mutex_trylock(mutex);
+  if (locked) __tsan_acquire(mutex);
   return locked;
 }
 
-void
-g_rec_mutex_unlock (GRecMutex * mutex)
-{
-  REAL (g_rec_mutex_unlock);
-  __tsan_release (mutex);
-  real_g_rec_mutex_unlock (mutex);
+void g_rec_mutex_unlock(GRecMutex* mutex) {
+  REAL(g_rec_mutex_unlock);
+  __tsan_release(mutex);
+  real_g_rec_mutex_unlock(mutex);
 }
 
-void
-g_cond_wait (GCond * cond, GMutex * mutex)
-{
-  REAL (g_cond_wait);
-  __tsan_release (mutex);
-  real_g_cond_wait (cond, mutex);
-  __tsan_acquire (mutex);
+void g_cond_wait(GCond* cond, GMutex* mutex) {
+  REAL(g_cond_wait);
+  __tsan_release(mutex);
+  real_g_cond_wait(cond, mutex);
+  __tsan_acquire(mutex);
 }
 
-gboolean
-g_cond_wait_until (GCond * cond, GMutex * mutex, gint64 end_time)
-{
-  REAL (g_cond_wait_until);
-  __tsan_release (mutex);
-  gboolean signalled = real_g_cond_wait_until (cond, mutex, end_time);
-  __tsan_acquire (mutex);
+gboolean g_cond_wait_until(GCond* cond, GMutex* mutex, gint64 end_time) {
+  REAL(g_cond_wait_until);
+  __tsan_release(mutex);
+  gboolean signalled = real_g_cond_wait_until(cond, mutex, end_time);
+  __tsan_acquire(mutex);
   return signalled;
 }

@@ -38,8 +38,8 @@ std::string write_temp(const std::string& name, const std::string& bytes) {
 
 // A valid OpenCV YAML calibration with `entries` appended.
 std::string yaml_with(const std::string& matrix_data, const std::string& entries = "") {
-  return "%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ " +
-         matrix_data + " ]\n" + entries;
+  return "%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ " + matrix_data +
+         " ]\n" + entries;
 }
 const std::string kGoodK = "600., 0., 319.5, 0., 600., 239.5, 0., 0., 1.";
 // The same in XML and JSON, with `entries` after it.
@@ -180,8 +180,9 @@ TEST(CameraFile, ReproducersOfOpenCvParserFailures) {
   e = load_error(kData + "/huge_matrix.yml");
   EXPECT_MENTIONS(e, "huge_matrix.yml");
   EXPECT_MENTIONS(e, "is 100000000x100000000, expected 3x3");
-  e = parse_error(yaml_with(kGoodK, "distortion_coefficients: !!opencv-matrix\n   rows: 100000000\n   cols: "
-                                    "100000000\n   dt: d\n   data: [ 0. ]\n"));
+  e = parse_error(yaml_with(kGoodK,
+                            "distortion_coefficients: !!opencv-matrix\n   rows: 100000000\n   cols: "
+                            "100000000\n   dt: d\n   data: [ 0. ]\n"));
   EXPECT_MENTIONS(e, "expected 4, 5 or 8");
   // Declared small, but with many values: the reading stops at 256.
   std::string many;
@@ -190,8 +191,10 @@ TEST(CameraFile, ReproducersOfOpenCvParserFailures) {
   EXPECT_MENTIONS(e, "more than 256 values");
   std::string many_json;
   for (int i = 0; i < 100000; ++i) many_json += "1, ";
-  e = parse_error("{\"camera_matrix\": {\"type_id\": \"opencv-matrix\", \"rows\": 3, \"cols\": 3, \"dt\": \"d\", "
-                  "\"data\": [" + many_json + "1]}}");
+  e = parse_error(
+      "{\"camera_matrix\": {\"type_id\": \"opencv-matrix\", \"rows\": 3, \"cols\": 3, \"dt\": \"d\", "
+      "\"data\": [" +
+      many_json + "1]}}");
   EXPECT_MENTIONS(e, "more than 256 values");
 }
 
@@ -201,7 +204,8 @@ TEST(CameraFile, ImageSizeMustBeAWholeNumberInRange) {
     EXPECT_MENTIONS(e, "inline: 'image_width'");
     EXPECT_MENTIONS(e, "expected");
   }
-  EXPECT_MENTIONS(parse_error(yaml_with(kGoodK, "image_height: -480\n")), "'image_height' is '-480', expected a whole number of pixels from 0 to 65536");
+  EXPECT_MENTIONS(parse_error(yaml_with(kGoodK, "image_height: -480\n")),
+                  "'image_height' is '-480', expected a whole number of pixels from 0 to 65536");
   // The limits themselves load; 0 is "unknown".
   EXPECT_EQ(Camera::parse(yaml_with(kGoodK, "image_width: 65536\nimage_height: 0\n")).width, 65536);
   // XML and JSON go through the same checks.
@@ -235,8 +239,9 @@ TEST(CameraFile, IntrinsicsMustBeFiniteAndInRange) {
                   "has 6 coefficients, expected 4, 5 or 8");
   EXPECT_MENTIONS(parse_error(yaml_with(kGoodK, d + "12\n   dt: d\n   data: [ 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0 ]\n")),
                   "thin-prism (12) and tilted-sensor (14) models are not supported");
-  EXPECT_MENTIONS(parse_error(yaml_with(kGoodK, "distortion_coefficients: !!opencv-matrix\n   rows: 2\n   cols: 2\n"
-                                                "   dt: d\n   data: [ 0, 0, 0, 0 ]\n")),
+  EXPECT_MENTIONS(parse_error(yaml_with(kGoodK,
+                                        "distortion_coefficients: !!opencv-matrix\n   rows: 2\n   cols: 2\n"
+                                        "   dt: d\n   data: [ 0, 0, 0, 0 ]\n")),
                   "is 2x2, expected 4, 5 or 8 coefficients in one row or column");
   EXPECT_MENTIONS(parse_error(yaml_with(kGoodK, d + "4\n   dt: d\n   data: [ 0, 0, 0 ]\n")),
                   "'distortion_coefficients' data is a list of 3 values, expected 4 numbers (1x4)");
@@ -280,8 +285,9 @@ TEST(CameraFile, NestingAliasesAndEntitiesAreRefused) {
   laughs += "]>\n<opencv_storage><image_width>&lol9;</image_width></opencv_storage>\n";
   e = error_within([&] { Camera::parse(laughs, "lolz.xml"); });
   EXPECT_MENTIONS(e, "lolz.xml: it has an XML document type or entity declaration");
-  e = parse_error("<?xml version=\"1.0\"?><!DOCTYPE x SYSTEM \"file:///etc/passwd\"><opencv_storage>"
-                  "</opencv_storage>");
+  e = parse_error(
+      "<?xml version=\"1.0\"?><!DOCTYPE x SYSTEM \"file:///etc/passwd\"><opencv_storage>"
+      "</opencv_storage>");
   EXPECT_MENTIONS(e, "document type");
   // Entities that are not declared are XML errors.
   e = parse_error("<?xml version=\"1.0\"?><opencv_storage><image_width>&x;</image_width></opencv_storage>");
@@ -302,7 +308,8 @@ std::string fill_to_limit(std::string text, const std::function<std::string(int)
 std::string name_of(int i) {
   const char* letters = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ";
   std::string name;
-  do name += letters[i % 52], i /= 52; while (i > 0);
+  do name += letters[i % 52], i /= 52;
+  while (i > 0);
   return name;
 }
 
@@ -312,10 +319,12 @@ TEST(CameraFile, XmlAttributesAndNestingAreBoundedBeforeLibxml2) {
   // A linear pass before libxml2 refuses more than 8 on one element.
   const std::string head = "<?xml version=\"1.0\"?>\n<opencv_storage>\n<other";
   const std::string tail = "/>\n</opencv_storage>\n";
-  const std::string attributes = fill_to_limit(head, [](int i) { return " " + name_of(i) + "=\"\""; }, tail);
+  const std::string attributes = fill_to_limit(
+      head, [](int i) { return " " + name_of(i) + "=\"\""; }, tail);
   std::string e = error_within([&] { Camera::parse(attributes, "attributes.xml"); });
   EXPECT_MENTIONS(e, "attributes.xml: the XML element '<other>' has more than 8 attributes");
-  const std::string namespaces = fill_to_limit(head, [](int i) { return " xmlns:" + name_of(i) + "=\"u\""; }, tail);
+  const std::string namespaces = fill_to_limit(
+      head, [](int i) { return " xmlns:" + name_of(i) + "=\"u\""; }, tail);
   EXPECT_MENTIONS(error_within([&] { Camera::parse(namespaces, "ns.xml"); }), "has more than 8 attributes");
   // The attributes OpenCV writes are read.
   EXPECT_EQ(parse_error(xml_with("<other a=\"1\" b='2' c=\"x=y\"/>\n")), "");
@@ -327,22 +336,24 @@ TEST(CameraFile, XmlAttributesAndNestingAreBoundedBeforeLibxml2) {
 
 TEST(CameraFile, EveryFormatHasAtMost20000Nodes) {
   // Every node costs each parser an allocation or two: at most 20,000 in a file.
-  const std::string elements =
-      fill_to_limit(xml_with("").substr(0, xml_with("").size() - 18), [](int) { return "<a/>"; }, "</opencv_storage>\n");
+  const std::string elements = fill_to_limit(
+      xml_with("").substr(0, xml_with("").size() - 18), [](int) { return "<a/>"; }, "</opencv_storage>\n");
   EXPECT_MENTIONS(parse_error(elements), "more than 20000 XML elements, attributes, comments and references");
-  const std::string comments =
-      fill_to_limit(xml_with("").substr(0, xml_with("").size() - 18), [](int) { return "<!---->"; }, "</opencv_storage>\n");
+  const std::string comments = fill_to_limit(
+      xml_with("").substr(0, xml_with("").size() - 18), [](int) { return "<!---->"; }, "</opencv_storage>\n");
   EXPECT_MENTIONS(parse_error(comments), "more than 20000 XML elements");
-  const std::string keys = fill_to_limit(yaml_with(kGoodK), [](int i) { return name_of(i) + ": 1\n"; }, "");
+  const std::string keys = fill_to_limit(
+      yaml_with(kGoodK), [](int i) { return name_of(i) + ": 1\n"; }, "");
   EXPECT_MENTIONS(parse_error(keys), "more than 20000 YAML nodes");
-  const std::string lists = fill_to_limit(yaml_with(kGoodK, "other: ["), [](int) { return "[], "; }, "1]\n");
+  const std::string lists = fill_to_limit(
+      yaml_with(kGoodK, "other: ["), [](int) { return "[], "; }, "1]\n");
   EXPECT_MENTIONS(parse_error(lists), "more than 20000 YAML nodes");
   const std::string json = json_with("");
-  const std::string json_keys = fill_to_limit(json.substr(0, json.size() - 1),
-                                              [](int i) { return ", \"" + name_of(i) + "\": 1"; }, "}");
+  const std::string json_keys = fill_to_limit(
+      json.substr(0, json.size() - 1), [](int i) { return ", \"" + name_of(i) + "\": 1"; }, "}");
   EXPECT_MENTIONS(parse_error(json_keys), "more than 20000 JSON values and keys");
-  const std::string arrays =
-      fill_to_limit(json.substr(0, json.size() - 1) + ", \"other\": [", [](int) { return "[],"; }, "1]}");
+  const std::string arrays = fill_to_limit(
+      json.substr(0, json.size() - 1) + ", \"other\": [", [](int) { return "[],"; }, "1]}");
   EXPECT_MENTIONS(parse_error(arrays), "more than 20000 JSON values and keys");
   // A calibration with 15,000 values in an entry that is skipped (the image points of 140
   // views of a 9x6 board) is read in every format.
@@ -355,8 +366,8 @@ TEST(CameraFile, EveryFormatHasAtMost20000Nodes) {
 
 TEST(CameraFile, YamlDirectivesAndLongNumbersAreBounded) {
   // libyaml checks each %TAG directive against all before it (60,000 in 1 MiB took 9 s).
-  const std::string tags = fill_to_limit("%YAML:1.0\n", [](int i) { return "%TAG !" + name_of(i) + "! tag:x:\n"; },
-                                         yaml_with(kGoodK).substr(10));
+  const std::string tags = fill_to_limit(
+      "%YAML:1.0\n", [](int i) { return "%TAG !" + name_of(i) + "! tag:x:\n"; }, yaml_with(kGoodK).substr(10));
   EXPECT_MENTIONS(error_within([&] { Camera::parse(tags, "tags.yml"); }),
                   "tags.yml: it has more than 8 lines starting with '%' (YAML directives)");
 
@@ -380,7 +391,8 @@ TEST(CameraFile, OnlyRegularFilesAreOpened) {
   ASSERT_EQ(::symlink(loop.c_str(), loop.c_str()), 0);
   ASSERT_EQ(::symlink((dir + "/none.yml").c_str(), dangling.c_str()), 0);
   const std::string name = "calibration file '" + fifo + "'";
-  EXPECT_MENTIONS(error_within([&] { Camera::load(fifo); }), name + " cannot be opened: it is a FIFO, expected a regular file");
+  EXPECT_MENTIONS(error_within([&] { Camera::load(fifo); }),
+                  name + " cannot be opened: it is a FIFO, expected a regular file");
   EXPECT_MENTIONS(error_within([&] { Camera::load(dir); }), "cannot be opened: it is a directory");
   EXPECT_MENTIONS(error_within([] { Camera::load("/dev/zero"); }),
                   "calibration file '/dev/zero' cannot be opened: it is a character device");
@@ -472,7 +484,8 @@ TEST(CameraFile, BrokenFilesOfEveryFormat) {
   const std::string png = "\x89PNG\r\n\x1a\n" + std::string("\0\0\0\rIHDR", 8);
   EXPECT_MENTIONS(parse_error(png), "NUL byte at offset 8");
   // Unprintable bytes from the file are escaped in messages.
-  EXPECT_MENTIONS(parse_error(json_with(", \"image_width\": \"\\u001b[31m\"")), "'image_width' is '\\x1b[31m', expected a number");
+  EXPECT_MENTIONS(parse_error(json_with(", \"image_width\": \"\\u001b[31m\"")),
+                  "'image_width' is '\\x1b[31m', expected a number");
 }
 
 TEST(CameraFile, ProgrammaticCamerasGetTheSameChecks) {
@@ -497,9 +510,10 @@ TEST(CameraFile, ProgrammaticCamerasGetTheSameChecks) {
 
 TEST(CameraFile, RoundTripsThroughSaveInEveryFormat) {
   for (const char* ext : {"yml", "yaml", "xml", "json"}) {
-    for (const std::vector<double>& distortion :
-         {std::vector<double>{}, {0.1, -0.05, 0.001, 0.002}, {0.1, -0.05, 0.001, 0.002, 0.01},
-          {0.1, -0.05, 0.001, 0.002, 0.01, 0.3, -0.02, 1e-7}}) {
+    for (const std::vector<double>& distortion : {std::vector<double>{},
+                                                  {0.1, -0.05, 0.001, 0.002},
+                                                  {0.1, -0.05, 0.001, 0.002, 0.01},
+                                                  {0.1, -0.05, 0.001, 0.002, 0.01, 0.3, -0.02, 1e-7}}) {
       Camera c = Camera::pinhole(628.158, 628.156, 324.099, 260.908, 640, 480);
       c.distortion = distortion;
       const std::string path = testing::TempDir() + "/roundtrip." + ext;
@@ -539,7 +553,8 @@ TEST(CameraFile, LoadsWhatOpenCvWritesDirectly) {
           const std::string path = testing::TempDir() + "/opencv." + ext;
           {
             cv::FileStorage fs(path, cv::FileStorage::WRITE);
-            fs << "calibration_time" << "Tue 25 Nov 2026";
+            fs << "calibration_time"
+               << "Tue 25 Nov 2026";
             fs << "nframes" << 20 << "image_width" << 1280 << "image_height" << 720;
             fs << (gst_keys ? "cameraMatrix" : "camera_matrix") << km;
             fs << (gst_keys ? "distCoeffs" : "distortion_coefficients") << dm;

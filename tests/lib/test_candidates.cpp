@@ -12,8 +12,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "lftag/render.hpp"
 #include "binary.hpp"
+#include "lftag/render.hpp"
 #include "stages.hpp"
 
 using namespace lftag;
@@ -181,8 +181,8 @@ TEST(MeasureBlob, CentroidsOfRasterisedMarkersAreTheSquareCentres) {
       ASSERT_GE(r, 0);
       ASSERT_TRUE(a.tree.regions[r].black) << f.name() << " cell " << g;
       const Blob b = detail::BlobMeasurer().measure(a.tree, r, a.view(), a.binary, 1, 255.0);
-      EXPECT_LT(cv::norm(b.centroid - truth), 0.02) << f.name() << " at " << ppu << " px/u, cell " << g << ": "
-                                                    << b.centroid << " vs " << truth;
+      EXPECT_LT(cv::norm(b.centroid - truth), 0.02)
+          << f.name() << " at " << ppu << " px/u, cell " << g << ": " << b.centroid << " vs " << truth;
       // The mass is the square's ink: area in pixels x 255.
       const UnitRect s = f.black_squares(id)[g];
       EXPECT_NEAR(b.mass, 255.0 * s.width * s.height * ppu * ppu, 0.02 * 255.0 * s.width * s.height * ppu * ppu);
@@ -214,8 +214,8 @@ TEST(MeasureBlob, CentroidsOfATiltedSceneAreTheProjectedSquareCentroids) {
     const int r = a.at(t.centers[g]);
     ASSERT_TRUE(r >= 0 && a.tree.regions[r].black);
     const Blob b = detail::BlobMeasurer().measure(a.tree, r, a.view(), a.binary, 1, white);
-    EXPECT_LT(cv::norm(b.centroid - t.centroids[g]), 0.02) << "cell " << g << ": " << b.centroid << " vs "
-                                                           << t.centroids[g];
+    EXPECT_LT(cv::norm(b.centroid - t.centroids[g]), 0.02)
+        << "cell " << g << ": " << b.centroid << " vs " << t.centroids[g];
   }
 }
 
@@ -232,18 +232,18 @@ TEST(MeasureBlob, RingPixelsGoToTheNearestBlobAndTiesCountHalf) {
       ".........",
       ".........",
   });
-  const std::vector<Probe> probes = {{2, 1, 155, 0.5}, {4, 1, 135, 0.5}, {3, 2, 95, 0.5}, {2, 2, 205, 1.0},
+  const std::vector<Probe> probes = {{2, 1, 155, 0.5}, {4, 1, 135, 0.5}, {3, 2, 95, 0.5},  {2, 2, 205, 1.0},
                                      {4, 2, 175, 1.0}, {0, 1, 225, 1.0}, {6, 3, 185, 1.0}, {3, 0, 15, 0.0},
-                                     {0, 0, 35, 0.0},  {0, 2, 245, 1.0}, {4, 4, 55, 1.0}, {6, 0, 5, 0.0}};
+                                     {0, 0, 35, 0.0},  {0, 2, 245, 1.0}, {4, 4, 55, 1.0},  {6, 0, 5, 0.0}};
   for (const Probe& p : probes) grey(p.y, p.x) = uchar(p.grey);
   cv::Mat1b black = from_rows({
-      ".........",
-      ".#.#.#...",
-      ".#...#...",
-      ".#####...",
-      ".........",
-      ".........",
-  }) == 0;
+                        ".........",
+                        ".#.#.#...",
+                        ".#...#...",
+                        ".#####...",
+                        ".........",
+                        ".........",
+                    }) == 0;
   const Analysed a = analyse(grey, black);
   const int u = a.at(1, 1);
   ASSERT_EQ(a.tree.regions[u].area, 9);
@@ -386,7 +386,8 @@ TEST(FindCandidates, LocalWhiteIsTheUpperQuartileOfTheWhiteRegion) {
   const cv::Mat1b black = grey == 0;
   for (int y = 0; y < grey.rows; ++y)
     for (int x = 0; x < grey.cols; ++x)
-      if (!black(y, x) && x > 8 && x < 102 && y > 8 && y < 102) grey(y, x) = uchar(120 + 40 * std::min(3, (x - 8) * 4 / 94));
+      if (!black(y, x) && x > 8 && x < 102 && y > 8 && y < 102)
+        grey(y, x) = uchar(120 + 40 * std::min(3, (x - 8) * 4 / 94));
   const Analysed a = analyse(grey, black);
   const int room = a.at(10, 10);
   std::vector<int> levels;
@@ -539,8 +540,8 @@ TEST(FindCandidates, TheNSquaredLargestChildrenAreKept) {
   // Twelve children of distinct sizes 9 x 9 .. 14 x 14 (and 9 x 10 ...): the nine largest
   // are the blobs, whatever the order in which the labeller met them.
   std::vector<cv::Rect> rects;
-  const int sizes[12][2] = {{9, 9}, {14, 14}, {10, 9}, {13, 13}, {10, 10}, {12, 13},
-                            {11, 10}, {12, 12}, {11, 11}, {9, 11}, {14, 13}, {11, 12}};
+  const int sizes[12][2] = {{9, 9},   {14, 14}, {10, 9},  {13, 13}, {10, 10}, {12, 13},
+                            {11, 10}, {12, 12}, {11, 11}, {9, 11},  {14, 13}, {11, 12}};
   for (int i = 0; i < 12; ++i) rects.emplace_back(8 + (i % 4) * 22, 8 + (i / 4) * 28, sizes[i][0], sizes[i][1]);
   const Analysed a = analyse(boxed(100, 3, rects));
   std::vector<std::pair<int, int>> by_area;  // (area, region)

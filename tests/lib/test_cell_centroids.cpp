@@ -32,8 +32,7 @@ struct Rendered {
 
 // A marker `pixels` across at a random turn, tilt (up to 30 degrees) and sub-pixel place,
 // defocused by `defocus` px and lit by a gradient of `gradient` across the frame.
-Rendered render(int n, double pixels, double defocus, double gradient, std::mt19937_64& rng,
-                cv::Point2d at = {0, 0}) {
+Rendered render(int n, double pixels, double defocus, double gradient, std::mt19937_64& rng, cv::Point2d at = {0, 0}) {
   std::uniform_real_distribution<double> u(-1, 1);
   Rendered r;
   r.marker.family = Family(n);
@@ -144,16 +143,16 @@ TEST(CellCentroids, NoneForASmallMarkerOrAWindowOutsideTheFrame) {
   std::mt19937_64 rng(7);
   // 3x3 at 26 px across: about 1.1 px per unit, where the window's pixels are too few.
   const Rendered small = render(3, 26, 0, 0, rng);
-  EXPECT_TRUE(cell_centroids(ImageView(small.image), kCamera, small.marker.family, small.marker.id, small.homography)
-                  .empty());
+  EXPECT_TRUE(
+      cell_centroids(ImageView(small.image), kCamera, small.marker.family, small.marker.id, small.homography).empty());
   // 44 px: read.
   const Rendered fair = render(3, 44, 0, 0, rng);
   EXPECT_EQ(cell_centroids(ImageView(fair.image), kCamera, fair.marker.family, fair.marker.id, fair.homography).size(),
             9u);
   // A marker whose squares' windows reach past the frame's edge.
   const Rendered edge = render(3, 80, 0, 0, rng, {-300, 0});
-  EXPECT_TRUE(cell_centroids(ImageView(edge.image), kCamera, edge.marker.family, edge.marker.id, edge.homography)
-                  .empty());
+  EXPECT_TRUE(
+      cell_centroids(ImageView(edge.image), kCamera, edge.marker.family, edge.marker.id, edge.homography).empty());
   // A homography that is not finite.
   const double nan = std::nan("");
   EXPECT_TRUE(cell_centroids(ImageView(fair.image), kCamera, fair.marker.family, fair.marker.id,

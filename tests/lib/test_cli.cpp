@@ -434,8 +434,10 @@ TEST(Cli, DetectTakesEveryTunableAsAnOption) {
   for (const lftag::io::Tunable& t : lftag::io::tunables())
     EXPECT_NE(help.output.find(std::string("--") + t.name), std::string::npos) << t.name;
   // Options read as the element's properties are: the marker is read with any of them.
-  CliResult r = run("detect --family 3x3 --second-look false --max-ink-ratio 3 --max-decode-error 0.001 "
-                    "--max-cell-residual 0.4 --min-spread-ratio 0.2 --deadline 0 " + image);
+  CliResult r =
+      run("detect --family 3x3 --second-look false --max-ink-ratio 3 --max-decode-error 0.001 "
+          "--max-cell-residual 0.4 --min-spread-ratio 0.2 --deadline 0 " +
+          image);
   ASSERT_EQ(r.status, 0) << r.output;
   const auto lines = json_lines(r.output);
   ASSERT_EQ(lines.size(), 1u) << r.output;

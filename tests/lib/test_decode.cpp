@@ -10,8 +10,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "lftag/render.hpp"
 #include "binary.hpp"
+#include "lftag/render.hpp"
 #include "stages.hpp"
 
 using namespace lftag;
@@ -35,7 +35,7 @@ struct Prepared {
   Camera camera;
   Candidate candidate;
   KeyPoints keypoints;
-  std::vector<int> blob_of_cell;  // the truth: the blob nearest each square's centre
+  std::vector<int> blob_of_cell;           // the truth: the blob nearest each square's centre
   std::vector<cv::Point2d> truth_corners;  // the marker's outer corners, when known
 };
 
@@ -59,7 +59,8 @@ std::optional<Prepared> prepare(const cv::Mat1b& image, const Family& f, const C
   auto nearest = [&](cv::Point2d t) {
     int best = -1;
     for (int j = 0; j < int(p.candidate.blobs.size()); ++j)
-      if (best < 0 || cv::norm(p.candidate.blobs[j].centroid - t) < cv::norm(p.candidate.blobs[best].centroid - t)) best = j;
+      if (best < 0 || cv::norm(p.candidate.blobs[j].centroid - t) < cv::norm(p.candidate.blobs[best].centroid - t))
+        best = j;
     return best;
   };
   for (int i = 0; i < 4; ++i) p.keypoints.blob[i] = nearest(truth_keypoints[i]);
@@ -139,10 +140,14 @@ void expect_good(const Prepared& p, const std::optional<Decoding>& d, TagId id, 
 }  // namespace
 
 TEST(Decode, FrontoParallelMarkersOfSeveralFamilies) {
-  const std::tuple<int, TagId, double> cases[] = {
-      {2, TagId(0), 6.0},           {2, TagId(13), 4.4},           {3, TagId(6789), 5.3},
-      {3, TagId(16383), 3.1},       {4, TagId(268435455), 4.7},    {4, TagId(98765), 2.6},
-      {6, TagId::parse("0xabcdef0123456789a"), 4.2}, {6, TagId(1), 3.3}};
+  const std::tuple<int, TagId, double> cases[] = {{2, TagId(0), 6.0},
+                                                  {2, TagId(13), 4.4},
+                                                  {3, TagId(6789), 5.3},
+                                                  {3, TagId(16383), 3.1},
+                                                  {4, TagId(268435455), 4.7},
+                                                  {4, TagId(98765), 2.6},
+                                                  {6, TagId::parse("0xabcdef0123456789a"), 4.2},
+                                                  {6, TagId(1), 3.3}};
   for (const auto& [n, id, ppu] : cases) {
     const Family f(n);
     const std::string what = f.name() + " id " + id.to_decimal() + " at " + std::to_string(ppu) + " px/u";
@@ -159,12 +164,12 @@ TEST(Decode, TiltedMarkersWithAndWithoutLensDistortion) {
     double roll, tilt, pan;
     bool distortion;
   };
-  for (const Case& c : {Case{3, 4242, 20, 35, 0, false}, Case{3, 123, -60, 30, 25, true},
-                        Case{4, 7777777, 150, -40, 10, false}, Case{4, 31337, 45, 20, -35, true},
-                        Case{6, TagId::parse("0xfedcba9876543210f"), 10, 30, 0, false}}) {
+  for (const Case& c :
+       {Case{3, 4242, 20, 35, 0, false}, Case{3, 123, -60, 30, 25, true}, Case{4, 7777777, 150, -40, 10, false},
+        Case{4, 31337, 45, 20, -35, true}, Case{6, TagId::parse("0xfedcba9876543210f"), 10, 30, 0, false}}) {
     const Family f(c.n);
-    const std::string what = f.name() + " id " + c.id.to_decimal() + " tilt " + std::to_string(c.tilt) +
-                             (c.distortion ? " distorted" : "");
+    const std::string what =
+        f.name() + " id " + c.id.to_decimal() + " tilt " + std::to_string(c.tilt) + (c.distortion ? " distorted" : "");
     const auto p = prepare_scene(f, c.id, c.roll, c.tilt, c.pan, c.n >= 6 ? 200 : 120, c.distortion);
     ASSERT_TRUE(p) << what;
     expect_good(*p, run(*p, p->keypoints), c.id, what);
@@ -186,9 +191,9 @@ TEST(Decode, TheBaselineOnAnotherSideShowsInTheInkSpread) {
   open.max_ink_spread = 1e9;
   open.min_noise_margin = 0;
   for (int n = 2; n <= 8; ++n) open.max_decode_error[n] = 1e6;
-  for (const auto& [n, id, ppu] : {std::tuple{3, TagId(6789), 5.3}, std::tuple{4, TagId(98765), 4.0},
-                                   std::tuple{6, TagId(424242), 4.2}, std::tuple{2, TagId(7), 6.0},
-                                   std::tuple{3, TagId(0), 4.0}, std::tuple{4, TagId(268435455), 3.5}}) {
+  for (const auto& [n, id, ppu] :
+       {std::tuple{3, TagId(6789), 5.3}, std::tuple{4, TagId(98765), 4.0}, std::tuple{6, TagId(424242), 4.2},
+        std::tuple{2, TagId(7), 6.0}, std::tuple{3, TagId(0), 4.0}, std::tuple{4, TagId(268435455), 3.5}}) {
     const Family f(n);
     const auto p = prepare_raster(f, id, ppu);
     ASSERT_TRUE(p);
@@ -323,8 +328,8 @@ TEST(Decode, TheNoiseMarginIsTheLeastCellsDistanceFromAnotherDigitInUnitsOfTheBl
     Prepared moved = scattered;
     moved.candidate.blobs[p->blob_of_cell[4]].point.x += shift * ppu;
     DetectionStats stats;
-    const auto d = detail::decode(moved.candidate, moved.keypoints, ImageView(moved.image), moved.camera, loose,
-                                  stats, nullptr);
+    const auto d =
+        detail::decode(moved.candidate, moved.keypoints, ImageView(moved.image), moved.camera, loose, stats, nullptr);
     const std::string what = "shifted " + std::to_string(shift) + " u";
     ASSERT_TRUE(d) << what;
     EXPECT_EQ(d->id, id) << what;
@@ -465,16 +470,18 @@ TEST(Decode, NonFiniteOrWrappedProjectionsAreNoReading) {
     Prepared q = *p;
     for (detail::Blob& b : q.candidate.blobs) b.point = bad;
     DetectionStats stats;
-    const auto d = detail::decode(q.candidate, q.keypoints, ImageView(q.image), q.camera, DetectorParams{}, stats, nullptr);
+    const auto d =
+        detail::decode(q.candidate, q.keypoints, ImageView(q.image), q.camera, DetectorParams{}, stats, nullptr);
     EXPECT_FALSE(d && d->verdict == detail::Verdict::accepted);
   }
   // K2 and K3 swapped with K0 and K1 across a line through the marker: a bow-tie.
   Prepared q = *p;
   std::swap(q.candidate.blobs[q.keypoints.blob[2]].point, q.candidate.blobs[q.keypoints.blob[3]].point);
-  q.candidate.blobs[q.keypoints.blob[2]].point.y = 2 * q.candidate.blobs[q.keypoints.blob[0]].point.y -
-                                                   q.candidate.blobs[q.keypoints.blob[2]].point.y;
+  q.candidate.blobs[q.keypoints.blob[2]].point.y =
+      2 * q.candidate.blobs[q.keypoints.blob[0]].point.y - q.candidate.blobs[q.keypoints.blob[2]].point.y;
   DetectionStats stats;
-  const auto d = detail::decode(q.candidate, q.keypoints, ImageView(q.image), q.camera, DetectorParams{}, stats, nullptr);
+  const auto d =
+      detail::decode(q.candidate, q.keypoints, ImageView(q.image), q.camera, DetectorParams{}, stats, nullptr);
   EXPECT_FALSE(d && d->verdict == detail::Verdict::accepted);
 }
 
@@ -483,7 +490,8 @@ TEST(Decode, FitHomographyIsExactOnExactPoints) {
   for (int count : {4, 9, 25}) {
     std::vector<cv::Point2d> from, to;
     if (count == 4) from = {{0, 0}, {10, 1}, {11, 12}, {-1, 9}};
-    for (int i = 0; count > 4 && i < count; ++i) from.emplace_back(6 * (i % 5) + 0.5 * (i / 5), 6 * (i / 5) - 0.25 * (i % 5));
+    for (int i = 0; count > 4 && i < count; ++i)
+      from.emplace_back(6 * (i % 5) + 0.5 * (i / 5), 6 * (i / 5) - 0.25 * (i % 5));
     for (const cv::Point2d& u : from) to.push_back(apply(truth, u));
     const auto fit = detail::fit_homography(from, to);
     ASSERT_TRUE(fit) << count;

@@ -154,7 +154,7 @@ static Outcome far_markers_on_white_margin(int n, double distance, double blur_p
     m.family = Family(n);
     m.id = random_id(m.family, rng);
     m.margin_units = std::round(m.family.side() / 4.0);  // whole units
-    m.tvec = {0.05 * u(rng), 0.05 * u(rng), distance};  // sub-pixel offsets
+    m.tvec = {0.05 * u(rng), 0.05 * u(rng), distance};   // sub-pixel offsets
     // Blur runs along the marker's axes (vertically, the paper's angle 0), where it closes
     // the gaps soonest.
     m.rvec = rotation(blur_px > 0 ? 0 : 180 * u(rng), 0, 0);
@@ -164,7 +164,8 @@ static Outcome far_markers_on_white_margin(int n, double distance, double blur_p
     for (const Detection& d : detector.detect(ImageView(scene.image))) {
       // Measured in the frame, whatever patch the detection came from.
       for (int g = 0; g < n * n; ++g)
-        EXPECT_LT(cv::norm(d.centroids[g] - scene.truth[0].centroids[g]), tolerance * unit) << "from outline " << d.from_outline;
+        EXPECT_LT(cv::norm(d.centroids[g] - scene.truth[0].centroids[g]), tolerance * unit)
+            << "from outline " << d.from_outline;
       EXPECT_LT(cv::norm(d.center - scene.truth[0].center), 0.35);
       EXPECT_NEAR(d.tvec[2], distance, 0.1 * distance);
     }
@@ -517,7 +518,8 @@ TEST(Detector, OutlineReadsAreBoundedPerFrame) {
   cv::Mat1b tile(16 * 8, 16 * 8, std::uint8_t(220));
   cv::rectangle(tile, cv::Rect(0, 0, 12 * 8, 12 * 8), 25, cv::FILLED);
   for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) cv::rectangle(tile, cv::Rect((2 + 4 * c) * 8, (2 + 4 * r) * 8, 16, 16), 220, cv::FILLED);
+    for (int c = 0; c < 3; ++c)
+      cv::rectangle(tile, cv::Rect((2 + 4 * c) * 8, (2 + 4 * r) * 8, 16, 16), 220, cv::FILLED);
   cv::Mat1b big;
   cv::repeat(tile, 30, 54, big);  // 720 x 1296 px once reduced
   cv::Mat1b wall;

@@ -31,8 +31,8 @@ Detection detection_at(double x, double y, const cv::Vec3d& rvec = {0.3, -0.2, 0
   d.tag_size = 0.2;
   d.rvec = rvec;
   d.tvec = {(x - kCamera.cx) / kCamera.fx, (y - kCamera.cy) / kCamera.fy, 1.0};
-  const std::vector<cv::Point2d> p = kCamera.project(
-      {{-0.1, -0.1, 0}, {0.1, -0.1, 0}, {0.1, 0.1, 0}, {-0.1, 0.1, 0}, {0, 0, 0}}, d.rvec, d.tvec);
+  const std::vector<cv::Point2d> p =
+      kCamera.project({{-0.1, -0.1, 0}, {0.1, -0.1, 0}, {0.1, 0.1, 0}, {-0.1, 0.1, 0}, {0, 0, 0}}, d.rvec, d.tvec);
   for (int i = 0; i < 4; ++i) d.corners[i] = p[i];
   d.center = p[4];
   return d;
@@ -56,7 +56,8 @@ cv::Mat1b changed(const cv::Mat& a, const cv::Mat& b) {
 // label, grown by a margin.
 cv::Rect reach(const Detection& d, int margin) {
   std::vector<cv::Point2d> p(d.corners.begin(), d.corners.end());
-  const std::vector<cv::Point2d> axes = kCamera.project({{0, 0, 0}, {0.2, 0, 0}, {0, 0.2, 0}, {0, 0, 0.2}}, d.rvec, d.tvec);
+  const std::vector<cv::Point2d> axes =
+      kCamera.project({{0, 0, 0}, {0.2, 0, 0}, {0, 0.2, 0}, {0, 0, 0.2}}, d.rvec, d.tvec);
   p.insert(p.end(), axes.begin(), axes.end());
   double x0 = p[0].x, y0 = p[0].y, x1 = p[0].x, y1 = p[0].y;
   for (const cv::Point2d& q : p)
@@ -88,7 +89,8 @@ TEST(DrawDetections, TheLabelSitsBesideTheMarkerInsideTheFrame) {
     std::vector<cv::Point2f> p(d.corners.begin(), d.corners.end());
     return cv::boundingRect(p);
   };
-  for (const cv::Point2d& at : {cv::Point2d(320, 200), cv::Point2d(320, 470), cv::Point2d(5, 240), cv::Point2d(635, 10)}) {
+  for (const cv::Point2d& at :
+       {cv::Point2d(320, 200), cv::Point2d(320, 470), cv::Point2d(5, 240), cv::Point2d(635, 10)}) {
     const Detection d = small_at(at.x, at.y);
     cv::Mat1b image(480, 640, uchar(100));
     draw_detections(image, {d}, kCamera, id_only);
@@ -99,8 +101,10 @@ TEST(DrawDetections, TheLabelSitsBesideTheMarkerInsideTheFrame) {
     const cv::Rect drawn = cv::boundingRect(mask);
     ASSERT_GT(drawn.area(), 0);
     EXPECT_GT(drawn.width, 50) << "the label was cut by the frame's edge";  // "3x3:6789" is ~90 px wide
-    if (at.y < 400) EXPECT_GE(drawn.y, inside.br().y) << "under the marker";
-    else EXPECT_LE(drawn.br().y, inside.y) << "over the marker, at the frame's foot";
+    if (at.y < 400)
+      EXPECT_GE(drawn.y, inside.br().y) << "under the marker";
+    else
+      EXPECT_LE(drawn.br().y, inside.y) << "over the marker, at the frame's foot";
   }
 }
 

@@ -66,7 +66,7 @@ TEST(FalsePositives, NoneOnOpenCvPhotosAndVideos) {
   EXPECT_GT(stats.topology, 1000);  // plenty of candidates reached the later stages
   EXPECT_GT(stats.collinearity, 100);
   EXPECT_TRUE(count.hits.empty()) << count.hits.size() << " false positives, first: " << count.hits.front();
-  std::cout << count.frames << " frames, funnel " << stats.topology << " -> " << stats.area << " -> "
-            << stats.geometry << " -> " << stats.angle << " -> " << stats.collinearity << " -> " << stats.residual
-            << " -> " << stats.unambiguous << " -> " << stats.decoded << "\n";
+  std::cout << count.frames << " frames, funnel " << stats.topology << " -> " << stats.area << " -> " << stats.geometry
+            << " -> " << stats.angle << " -> " << stats.collinearity << " -> " << stats.residual << " -> "
+            << stats.unambiguous << " -> " << stats.decoded << "\n";
 }

@@ -27,13 +27,18 @@ std::vector<unsigned char> slurp(const std::string& path) {
 }
 
 void write(const std::string& path, const std::vector<unsigned char>& bytes) {
-  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
 }
 
 void put_be16(std::vector<unsigned char>& b, std::size_t at, unsigned v) { b[at] = v >> 8, b[at + 1] = v & 0xFF; }
-void put_be32(std::vector<unsigned char>& b, std::size_t at, unsigned v) { put_be16(b, at, v >> 16), put_be16(b, at + 2, v & 0xFFFF); }
+void put_be32(std::vector<unsigned char>& b, std::size_t at, unsigned v) {
+  put_be16(b, at, v >> 16), put_be16(b, at + 2, v & 0xFFFF);
+}
 void put_le16(std::vector<unsigned char>& b, std::size_t at, unsigned v) { b[at] = v & 0xFF, b[at + 1] = v >> 8; }
-void put_le32(std::vector<unsigned char>& b, std::size_t at, unsigned v) { put_le16(b, at, v & 0xFFFF), put_le16(b, at + 2, v >> 16); }
+void put_le32(std::vector<unsigned char>& b, std::size_t at, unsigned v) {
+  put_le16(b, at, v & 0xFFFF), put_le16(b, at + 2, v >> 16);
+}
 
 // The message read_grey_image refuses `path` with ("" if it reads it).
 std::string refusal(const std::string& path) {
@@ -78,8 +83,15 @@ std::vector<unsigned char> grey_tiff(bool big, bool little, unsigned w, unsigned
                                      unsigned rows = 0) {
   const unsigned offsets = big ? 16 : 4;
   return tiff(big, little,
-              {{256, width_type, w}, {257, 3, h}, {258, 3, 8}, {259, 3, 1}, {262, 3, 1}, {273, offsets, 0},
-               {277, 3, 1}, {278, 4, rows ? rows : h}, {279, 4, std::uint64_t(w) * h}},
+              {{256, width_type, w},
+               {257, 3, h},
+               {258, 3, 8},
+               {259, 3, 1},
+               {262, 3, 1},
+               {273, offsets, 0},
+               {277, 3, 1},
+               {278, 4, rows ? rows : h},
+               {279, 4, std::uint64_t(w) * h}},
               std::vector<unsigned char>(std::size_t(w) * h, 0x80));
 }
 
@@ -167,9 +179,9 @@ TEST(ImageFile, ColourPfmIsReadAsOneChannel) {
 TEST(ImageFile, ImagesPastTheLimitAreRefusedBeforeDecoding) {
   const cv::Mat image(37, 53, CV_8U, cv::Scalar(128));
   for (const char* ext : {"png", "jpg", "bmp"}) ASSERT_TRUE(cv::imwrite(kTmp + "/img." + ext, image));
-  const std::pair<const char*, std::vector<unsigned char>> cases[] = {
-      {"png", huge_png()}, {"jpg", huge_jpeg()}, {"bmp", huge_bmp()},
-      {"pgm", huge_pgm()}, {"tiff", huge_tiff()}, {"webp", huge_webp()}};
+  const std::pair<const char*, std::vector<unsigned char>> cases[] = {{"png", huge_png()},   {"jpg", huge_jpeg()},
+                                                                      {"bmp", huge_bmp()},   {"pgm", huge_pgm()},
+                                                                      {"tiff", huge_tiff()}, {"webp", huge_webp()}};
   for (const auto& [ext, bytes] : cases) {
     const std::string path = kTmp + "/huge." + ext;
     write(path, bytes);
@@ -266,8 +278,8 @@ TEST(ImageFile, BigTiffHeadersAreRead) {
       EXPECT_EQ(read_grey_image(kTmp + "/small.tiff").size(), cv::Size(53, 37)) << little << " " << type;
     }
   // A BigTIFF header of 12000 x 12000 (a 140 KB file once decoded into 760 MB) is refused.
-  const std::vector<TiffEntry> huge = {{256, 3, 12000}, {257, 3, 12000}, {258, 3, 8},  {259, 3, 8},   {262, 3, 1},
-                                      {273, 16, 0},     {277, 3, 1},     {278, 3, 12000}, {279, 16, 100}};
+  const std::vector<TiffEntry> huge = {{256, 3, 12000}, {257, 3, 12000}, {258, 3, 8},     {259, 3, 8},   {262, 3, 1},
+                                       {273, 16, 0},    {277, 3, 1},     {278, 3, 12000}, {279, 16, 100}};
   write(kTmp + "/huge.tiff", tiff(true, true, huge, std::vector<unsigned char>(100, 0)));
   EXPECT_EQ(image_file_size(kTmp + "/huge.tiff"), cv::Size(12000, 12000));
   EXPECT_MENTIONS(refusal(kTmp + "/huge.tiff"), "is 12000x12000 pixels, more than the limit of 100000000");
@@ -279,10 +291,11 @@ TEST(ImageFile, TiffTilesAndStripsAreWithinTheLimitToo) {
   // asked for 800 MB.
   write(kTmp + "/strips.tiff", grey_tiff(false, true, 10000, 1, 4, 20000));
   EXPECT_EQ(image_file_size(kTmp + "/strips.tiff"), cv::Size(10000, 1));
-  EXPECT_MENTIONS(refusal(kTmp + "/strips.tiff"), "tiles or strips of 10000x20000 pixels, more than the limit of 100000000");
+  EXPECT_MENTIONS(refusal(kTmp + "/strips.tiff"),
+                  "tiles or strips of 10000x20000 pixels, more than the limit of 100000000");
   EXPECT_EQ(read_grey_image(kTmp + "/strips.tiff", 10000 * 20000).size(), cv::Size(10000, 1));
-  const std::vector<TiffEntry> tiled = {{256, 3, 16}, {257, 3, 16}, {258, 3, 8}, {259, 3, 1}, {262, 3, 1},
-                                        {277, 3, 1},  {322, 4, 16384}, {323, 4, 16384}};
+  const std::vector<TiffEntry> tiled = {{256, 3, 16}, {257, 3, 16}, {258, 3, 8},     {259, 3, 1},
+                                        {262, 3, 1},  {277, 3, 1},  {322, 4, 16384}, {323, 4, 16384}};
   write(kTmp + "/tiles.tiff", tiff(false, false, tiled, std::vector<unsigned char>(256, 0)));
   EXPECT_MENTIONS(refusal(kTmp + "/tiles.tiff"), "tiles or strips of 16384x16384 pixels");
   // Tiles of a few pixels (TIFF wants multiples of 16) would make millions of tile reads.

@@ -121,7 +121,7 @@ TEST(SignedAngle, PositiveClockwiseOnScreen) {
 }
 
 TEST(FindKeypoints, CanonicalGridsGiveEverySideAndTheTruth) {
-  const std::tuple<int, TagId> markers[] = {{2, TagId(9)},  {3, TagId(0)},        {3, TagId(6789)},
+  const std::tuple<int, TagId> markers[] = {{2, TagId(9)},  {3, TagId(0)},         {3, TagId(6789)},
                                             {4, TagId(77)}, {5, TagId(123456789)}, {5, TagId::parse("0x3ffffffffff")}};
   const double rolls[] = {0, 37, 90, 180, 251, -12};
   for (const auto& [n, id] : markers)
@@ -179,7 +179,8 @@ TEST(FindKeypoints, GeometryConstraintRejectsEverySide) {
   // 16 blobs on a circle: the largest quadrilateral takes every fourth, and each side has
   // three blobs beyond it where a 4x4 marker allows two.
   std::vector<cv::Point2d> points;
-  for (int i = 0; i < 16; ++i) points.emplace_back(100 + 50 * std::cos(i * CV_PI / 8), 100 + 50 * std::sin(i * CV_PI / 8));
+  for (int i = 0; i < 16; ++i)
+    points.emplace_back(100 + 50 * std::cos(i * CV_PI / 8), 100 + 50 * std::sin(i * CV_PI / 8));
   const Candidate c = from_points(Family(4), points);
   DetectionStats stats;
   EXPECT_TRUE(detail::find_keypoints(c, DetectorParams{}, stats).empty());
@@ -188,7 +189,8 @@ TEST(FindKeypoints, GeometryConstraintRejectsEverySide) {
   EXPECT_EQ(stats.collinearity, 0);
   // As a 5x5 set (25 points, three allowed beyond a side), the circle of 25 fails alike.
   points.clear();
-  for (int i = 0; i < 25; ++i) points.emplace_back(50 * std::cos(i * 2 * CV_PI / 25), 50 * std::sin(i * 2 * CV_PI / 25));
+  for (int i = 0; i < 25; ++i)
+    points.emplace_back(50 * std::cos(i * 2 * CV_PI / 25), 50 * std::sin(i * 2 * CV_PI / 25));
   DetectionStats s5;
   EXPECT_TRUE(detail::find_keypoints(from_points(Family(5), points), DetectorParams{}, s5).empty());
   EXPECT_EQ(s5.geometry, 0);
@@ -200,7 +202,8 @@ TEST(FindKeypoints, AngleConstraint) {
   // baseline seen from K0. The side K0 K1 passes the geometry constraint (one blob above,
   // n - 2 = 1 allowed); seen from K0 the other blobs turn by +phi in all, so the angle sum
   // is phi - beta: the side passes for beta < phi and is rejected for beta > phi.
-  const std::vector<cv::Point2d> base = {{0, 0}, {10, 0}, {13, 7.5}, {12, 3}, {5, 0.05}, {6, 0.05}, {7, 0.05}, {8, 0.05}};
+  const std::vector<cv::Point2d> base = {{0, 0},    {10, 0},   {13, 7.5}, {12, 3},
+                                         {5, 0.05}, {6, 0.05}, {7, 0.05}, {8, 0.05}};
   double phi = 0;
   for (std::size_t i = 2; i < base.size(); ++i) phi += std::atan2(base[i].y, base[i].x);
   ASSERT_NEAR(degrees(phi), 45.84, 0.01);

@@ -7,9 +7,9 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "lftag/render.hpp"
 #include "../../src/core/geometry.hpp"
 #include "binary.hpp"
+#include "lftag/render.hpp"
 #include "scenes.hpp"
 #include "stages.hpp"
 
@@ -97,8 +97,8 @@ TEST(OutlineReading, ReadsSquaresThatTouchUnderBlur) {
     const Far far = far_marker(4, id, 5, 0, 0.13 * 64);
     const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 1.0, rng), Family(4));
     ASSERT_TRUE(reading);
-    EXPECT_TRUE(acceptable(*reading, params)) << "correlation " << reading->correlation << " margin "
-                                              << reading->margin << " baseline gap " << reading->baseline_gap;
+    EXPECT_TRUE(acceptable(*reading, params)) << "correlation " << reading->correlation << " margin " << reading->margin
+                                              << " baseline gap " << reading->baseline_gap;
     EXPECT_EQ(reading->id, id);
   }
 }
@@ -151,7 +151,8 @@ TEST(OutlineReading, ThePixelModelReadsAtTheResolutionBound) {
     for (int trial = 0; trial < 10; ++trial) {
       const TagId id = random_id(Family(n), rng);
       const Far far = far_marker(n, id, distance, 180 * u(rng), 0, {0.05 * u(rng), 0.05 * u(rng)});
-      const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.3, rng), Family(n));
+      const auto reading =
+          read_outline(ImageView(far.scene.image), coarse(far.corners, trial % 4, 0.3, rng), Family(n));
       ASSERT_TRUE(reading);
       if (!acceptable(*reading, params)) continue;
       ++read;
@@ -322,12 +323,12 @@ TEST(OutlineReading, DimDefocusedMarkersAreNeverMisread) {
   int accepted = 0;
   for (const double paper : {0.4, 0.42, 0.45})
     for (const double distance : {9.5, 10.0, 10.5})
-    for (int trial = 0; trial < 5; ++trial) {
-      const auto [id, far, reading] = read_defocused(Family(4), distance, 0.3, paper, 20, trial, rng);
-      if (!reading || !acceptable(*reading, params)) continue;
-      ++accepted;
-      EXPECT_EQ(reading->id, id) << "paper " << paper << ", " << distance << " m, trial " << trial;
-    }
+      for (int trial = 0; trial < 5; ++trial) {
+        const auto [id, far, reading] = read_defocused(Family(4), distance, 0.3, paper, 20, trial, rng);
+        if (!reading || !acceptable(*reading, params)) continue;
+        ++accepted;
+        EXPECT_EQ(reading->id, id) << "paper " << paper << ", " << distance << " m, trial " << trial;
+      }
   EXPECT_GE(accepted, 1);
 }
 
@@ -440,7 +441,9 @@ TEST(CoarseOutlines, LeavesOutASpeckBesideTheMarker) {
     }
     best = std::min(best, worst);
   }
-  EXPECT_LT(best, 4.0) << "no outline near the border's corners: " << corners[0] << corners[1] << corners[2] << corners[3] << " outlines " << outlines.size() << " first " << outlines[0][0] << outlines[0][1] << outlines[0][2] << outlines[0][3];
+  EXPECT_LT(best, 4.0) << "no outline near the border's corners: " << corners[0] << corners[1] << corners[2]
+                       << corners[3] << " outlines " << outlines.size() << " first " << outlines[0][0] << outlines[0][1]
+                       << outlines[0][2] << outlines[0][3];
 }
 
 TEST(CoarseOutlines, TakesTheLargestQuadrilateralWhereTheApproximationSkipsFour) {
@@ -496,7 +499,7 @@ TEST(CoarseOutlines, TriesABorderJoinedByItsSquaresAloneBesideTheGroundsSpecks) 
   black(cv::Rect(46, 46, 48, 48)).setTo(0);  // the border, 6 px wide
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c) black(cv::Rect(46 + 18 * c, 46 + 18 * r, 12, 12)).setTo(255);  // the outer 8 touch it
-  black(cv::Rect(31, 31, 5, 5)).setTo(255);  // the ground's specks
+  black(cv::Rect(31, 31, 5, 5)).setTo(255);                                                    // the ground's specks
   black(cv::Rect(104, 32, 6, 4)).setTo(255);
   const std::array<cv::Point2d, 4> corners = {cv::Point2d(40, 40), {99, 40}, {99, 99}, {40, 99}};
   const auto border_alone = [&](const cv::Mat1b& mask) {
@@ -533,8 +536,8 @@ TEST(OutlineReading, AMarkerCutByTheFrameEdgeIsReadOnlyWhereItsSquaresAreSeen) {
   cv::Mat1b sheet(marker.rows + 40, marker.cols + 40, std::uint8_t(235));
   marker.copyTo(sheet(cv::Rect(20, 20, marker.cols, marker.rows)));
   const double s = family.side();
-  const std::array<cv::Point2d, 4> outline = {cv::Point2d(19.5, 19.5), {19.5 + s, 19.5}, {19.5 + s, 19.5 + s},
-                                              {19.5, 19.5 + s}};
+  const std::array<cv::Point2d, 4> outline = {
+      cv::Point2d(19.5, 19.5), {19.5 + s, 19.5}, {19.5 + s, 19.5 + s}, {19.5, 19.5 + s}};
   for (int cut = family.side() / 4; cut <= 3 * family.side() / 4; ++cut)
     for (const bool across : {false, true}) {
       const cv::Mat1b frame = across ? sheet(cv::Rect(0, 0, 20 + cut, sheet.rows)).clone()
@@ -589,8 +592,8 @@ TEST(OutlineReading, OtherMarkersAreRefusedBeforeTheAlignment) {
     EXPECT_LT(reading->correlation, kMinResolvedStartCorrelation) << "image " << i;
     EXPECT_EQ(outline_stage(*reading, params), Stage::structure) << "image " << i;
   }
-  EXPECT_GE(at_the_gate, 8);         // the 4x4s, the 5x5 and a square binary marker (measured)
-  EXPECT_GT(highest_start, 0.62);    // the near-misses are there
+  EXPECT_GE(at_the_gate, 8);       // the 4x4s, the 5x5 and a square binary marker (measured)
+  EXPECT_GT(highest_start, 0.62);  // the near-misses are there
   const TagId id = random_id(Family(3), rng);
   const auto reading = read_outline(ImageView(on_white(3, id)), quad, Family(3));
   ASSERT_TRUE(reading);
@@ -615,11 +618,13 @@ TEST(OutlineReading, TheBaselinesMustStandOutByAQuarterOfTheContrast) {
       const cv::Mat1b marker = rasterize_marker(Family(n), id, per_unit, 0);
       const int at = 20;
       marker.copyTo(image(cv::Rect(at, at, marker.cols, marker.rows)));
-      cv::rectangle(image, cv::Rect(at + int(4 * per_unit), at + int(4 * per_unit), int(per_unit), int(4 * per_unit)), g,
-                    cv::FILLED);
+      cv::rectangle(image, cv::Rect(at + int(4 * per_unit), at + int(4 * per_unit), int(per_unit), int(4 * per_unit)),
+                    g, cv::FILLED);
       const double s = Family(n).side() * per_unit;
-      const std::array<cv::Point2d, 4> quad = {cv::Point2d(at - 0.5, at - 0.5), {at + s - 0.5, at - 0.5},
-                                               {at + s - 0.5, at + s - 0.5}, {at - 0.5, at + s - 0.5}};
+      const std::array<cv::Point2d, 4> quad = {cv::Point2d(at - 0.5, at - 0.5),
+                                               {at + s - 0.5, at - 0.5},
+                                               {at + s - 0.5, at + s - 0.5},
+                                               {at - 0.5, at + s - 0.5}};
       const auto reading = read_outline(ImageView(image), quad, Family(n));
       ASSERT_TRUE(reading) << n << " " << g;
       if (g == 160) {
@@ -746,10 +751,11 @@ TEST(OutlineReading, EveryCellMustShowMostOfTheDifferenceItsDigitMakes) {
   ASSERT_EQ(digit >> 1, 0) << "the square must be free to move right";
   const TagId moved = id.with_digit(f.data_index(cell), digit | 2);
   for (const double ppu : {1.0, 2.5}) {
-    for (const auto& [shift, expected] : {std::pair{0.0, std::optional<TagId>(id)}, std::pair{0.25, std::optional<TagId>(id)},
-                                          std::pair{0.35, std::optional<TagId>()}, std::pair{0.5, std::optional<TagId>()},
-                                          std::pair{0.65, std::optional<TagId>()}, std::pair{0.75, std::optional<TagId>(moved)},
-                                          std::pair{1.0, std::optional<TagId>(moved)}}) {
+    for (const auto& [shift, expected] :
+         {std::pair{0.0, std::optional<TagId>(id)}, std::pair{0.25, std::optional<TagId>(id)},
+          std::pair{0.35, std::optional<TagId>()}, std::pair{0.5, std::optional<TagId>()},
+          std::pair{0.65, std::optional<TagId>()}, std::pair{0.75, std::optional<TagId>(moved)},
+          std::pair{1.0, std::optional<TagId>(moved)}}) {
       const std::string what = std::to_string(ppu) + " px per unit, moved " + std::to_string(shift);
       const Shifted m = shifted_marker(id, cell, shift, ppu);
       const auto reading = read_outline(ImageView(m.image), m.corners, f);

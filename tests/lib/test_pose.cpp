@@ -10,9 +10,9 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include "binary.hpp"
 #include "lftag/render.hpp"
 #include "scenes.hpp"
-#include "binary.hpp"
 #include "stages.hpp"
 
 using namespace lftag;
@@ -24,7 +24,6 @@ namespace {
 
 using lftag::test::rotation;
 using lftag::test::rotation_error_deg;
-
 
 struct Case {
   int n;
@@ -104,9 +103,10 @@ std::string describe(const Case& c) {
 }
 
 const Case kCases[] = {
-    {3, 6789, 0, 35, 0, false},       {3, 4321, 25, 30, 20, false},   {3, 16000, -70, 40, -10, false},
-    {4, 123456, 10, -35, 15, false},  {4, 98765, 130, 30, -25, false}, {3, 777, 15, 35, 10, true},
-    {4, 2718281, -40, 30, 20, true},  {6, TagId::parse("0x1234567890abcdef1"), 60, 35, 0, false, 160},
+    {3, 6789, 0, 35, 0, false},      {3, 4321, 25, 30, 20, false},
+    {3, 16000, -70, 40, -10, false}, {4, 123456, 10, -35, 15, false},
+    {4, 98765, 130, 30, -25, false}, {3, 777, 15, 35, 10, true},
+    {4, 2718281, -40, 30, 20, true}, {6, TagId::parse("0x1234567890abcdef1"), 60, 35, 0, false, 160},
 };
 
 }  // namespace
@@ -119,10 +119,12 @@ TEST(Pose, TiltedMarkersGiveTheTruePose) {
     const auto p = prepare(c);
     ASSERT_TRUE(p) << what;
     Detection det;
-    ASSERT_TRUE(detail::estimate_pose(p->candidate, p->decoding, p->camera, pose_params(p->marker.tag_size), det)) << what;
+    ASSERT_TRUE(detail::estimate_pose(p->candidate, p->decoding, p->camera, pose_params(p->marker.tag_size), det))
+        << what;
     const double distance = cv::norm(p->marker.tvec);
     EXPECT_LT(rotation_error_deg(det.rvec, p->marker.rvec), 1.0) << what;
-    EXPECT_LT(cv::norm(det.tvec - p->marker.tvec), 0.01 * distance) << what << ": " << det.tvec << " vs " << p->marker.tvec;
+    EXPECT_LT(cv::norm(det.tvec - p->marker.tvec), 0.01 * distance)
+        << what << ": " << det.tvec << " vs " << p->marker.tvec;
     EXPECT_LT(det.reprojection_error, 0.1) << what;
     // In fact far better on these clean renders, where only the centroids' pixel
     // quantisation remains (and the perspective bias of centroids, which the pose removes).
@@ -143,7 +145,8 @@ TEST(Pose, CornersAndCentreAreTheProjectedTruth) {
     ASSERT_TRUE(detail::estimate_pose(p->candidate, p->decoding, p->camera, pose_params(p->marker.tag_size), det));
     ASSERT_EQ(p->truth.corners.size(), 4u);
     // Within 0.1 px (the perspective bias of the blob centroids, up to 0.2 px here, removed).
-    for (int i = 0; i < 4; ++i) EXPECT_LT(cv::norm(det.corners[i] - p->truth.corners[i]), 0.1) << what << " corner " << i;
+    for (int i = 0; i < 4; ++i)
+      EXPECT_LT(cv::norm(det.corners[i] - p->truth.corners[i]), 0.1) << what << " corner " << i;
     const cv::Point2d centre = p->camera.project({cv::Point3d(0, 0, 0)}, p->marker.rvec, p->marker.tvec)[0];
     EXPECT_LT(cv::norm(det.center - centre), 0.03) << what;
     // The corners are the pose's own projection (distortion included) of the outer border.

@@ -99,9 +99,9 @@ TEST(Print, NumbersOutsideWhatAFileCanHoldAreRefused) {
   // Each of these once reached a float-to-int conversion (undefined) or a huge allocation.
   const std::string svg = testing::TempDir() + "/n.svg", png = testing::TempDir() + "/n.png";
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  for (auto set : std::vector<void (*)(PrintOptions&, double)>{
-           [](PrintOptions& o, double v) { o.size_m = v; }, [](PrintOptions& o, double v) { o.dpi = v; },
-           [](PrintOptions& o, double v) { o.margin_units = v; }})
+  for (auto set : std::vector<void (*)(PrintOptions&, double)>{[](PrintOptions&o, double v) { o.size_m = v; },
+                                                               [](PrintOptions&o, double v) { o.dpi = v; },
+                                                               [](PrintOptions&o, double v) { o.margin_units = v; }})
     for (double v : {nan, 1e300, -1.0}) {
       PrintOptions o;
       set(o, v);

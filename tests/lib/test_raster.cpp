@@ -23,13 +23,14 @@ cv::Mat1f marker_cells(const Family& f, TagId id) {
 }  // namespace
 
 TEST(Raster, CoverageAddsUpToTheAnalyticBlackArea) {
-  for (const auto& [n, id, scale] : {std::tuple{2, 5ull, 3.3}, std::tuple{3, 6789ull, 7.3}, std::tuple{4, 123456ull, 0.77},
-                                     std::tuple{8, 987654321ull, 2.05}}) {
+  for (const auto& [n, id, scale] : {std::tuple{2, 5ull, 3.3}, std::tuple{3, 6789ull, 7.3},
+                                     std::tuple{4, 123456ull, 0.77}, std::tuple{8, 987654321ull, 2.05}}) {
     const Family f(n);
     const cv::Mat1f cells = marker_cells(f, id);
     const int size = int(std::ceil((f.side() + 4) * scale)) + 1;
     // Arbitrary sub-pixel placement.
-    const cv::Mat1f image = resample_cells(cells, cv::Size(size, size), scale, cv::Point2d(2 * scale - 0.2, 2 * scale + 0.13));
+    const cv::Mat1f image =
+        resample_cells(cells, cv::Size(size, size), scale, cv::Point2d(2 * scale - 0.2, 2 * scale + 0.13));
     const double black = cv::sum(1.0 - image)[0] / (scale * scale);
     EXPECT_NEAR(black, analytic_black_area(f, id), 1e-3 * analytic_black_area(f, id)) << f.name();
   }

@@ -360,9 +360,11 @@ TEST(Regions, WhiteRegionWithBlackChildren) {
   EXPECT_EQ(w.area, 12 * 7 - 12);
   ASSERT_EQ(w.child_count, 5);
   // Square, two diagonal pixels (separate), an L and a bar.
-  const std::map<std::pair<int, int>, std::pair<int, cv::Vec4i>> kids = {
-      {{3, 3}, {4, {3, 3, 4, 4}}}, {{8, 3}, {1, {8, 3, 8, 3}}}, {{9, 4}, {1, {9, 4, 9, 4}}},
-      {{4, 6}, {4, {4, 6, 6, 7}}}, {{12, 6}, {2, {12, 6, 12, 7}}}};
+  const std::map<std::pair<int, int>, std::pair<int, cv::Vec4i>> kids = {{{3, 3}, {4, {3, 3, 4, 4}}},
+                                                                         {{8, 3}, {1, {8, 3, 8, 3}}},
+                                                                         {{9, 4}, {1, {9, 4, 9, 4}}},
+                                                                         {{4, 6}, {4, {4, 6, 6, 7}}},
+                                                                         {{12, 6}, {2, {12, 6, 12, 7}}}};
   std::vector<int> expected;
   for (const auto& [at, what] : kids) {
     const int r = l.map(at.second, at.first);
@@ -592,8 +594,10 @@ TEST(Regions, RandomImagesMatchAFloodFillReference) {
       const int x0 = int(rng() % w), y0 = int(rng() % h);
       const int x1 = std::min(w, x0 + 1 + int(rng() % 20)), y1 = std::min(h, y0 + 1 + int(rng() % 12));
       const uchar v = rng() % 2 ? 255 : 0;
-      if (rng() % 2) image(cv::Range(y0, y1), cv::Range(x0, x1)).setTo(v);
-      else cv::rectangle(image, cv::Point(x0, y0), cv::Point(x1 - 1, y1 - 1), cv::Scalar(v), 1);
+      if (rng() % 2)
+        image(cv::Range(y0, y1), cv::Range(x0, x1)).setTo(v);
+      else
+        cv::rectangle(image, cv::Point(x0, y0), cv::Point(x1 - 1, y1 - 1), cv::Scalar(v), 1);
     }
     for (int k = int(rng() % 8); k > 0; --k) image(int(rng() % h), int(rng() % w)) ^= 255;
     const std::string what = "blocky " + std::to_string(i) + " (" + std::to_string(w) + "x" + std::to_string(h) + ")";
@@ -615,7 +619,8 @@ TEST(Regions, CheckerboardTakesAtMostTwentyBytesAPixel) {
   binary.width = w, binary.height = h, binary.words_per_row = (w + 63) / 64;
   binary.bits.assign(std::size_t(binary.words_per_row) * h, 0);
   for (int y = 0; y < h; ++y)
-    for (int x = y & 1; x < w; x += 2) binary.bits[std::size_t(y) * binary.words_per_row + (x >> 6)] |= std::uint64_t{1} << (x & 63);
+    for (int x = y & 1; x < w; x += 2)
+      binary.bits[std::size_t(y) * binary.words_per_row + (x >> 6)] |= std::uint64_t{1} << (x & 63);
   RegionLabeller labeller;
   RegionTree t;
   labeller.label(binary, t);
@@ -638,7 +643,8 @@ TEST(Regions, CheckerboardTakesAtMostTwentyBytesAPixel) {
   for (const int r : {1, 2, w / 2 + 1, int(t.regions.size()) - 1}) {
     const std::vector<RowRun> runs = runs_of(t, r);
     ASSERT_EQ(runs.size(), 1u);
-    EXPECT_EQ(cv::Vec3i(runs[0].y, runs[0].x0, runs[0].x1), cv::Vec3i(t.regions[r].y0, t.regions[r].x0, t.regions[r].x0 + 1));
+    EXPECT_EQ(cv::Vec3i(runs[0].y, runs[0].x0, runs[0].x1),
+              cv::Vec3i(t.regions[r].y0, t.regions[r].x0, t.regions[r].x0 + 1));
   }
   std::size_t frame_runs = 0;
   t.for_each_run(kFrame, [&](int, int x0, int x1) { frame_runs += x1 - x0 == 1; });

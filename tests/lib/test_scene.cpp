@@ -15,11 +15,13 @@ namespace {
 cv::Point2d measured_centre(const cv::Mat1f& image, float white, const Camera& cam, const SceneMarker& m, int g) {
   const UnitRect s = m.family.black_squares(m.id)[g];
   std::vector<cv::Point3d> corners;
-  for (const cv::Point2d& u : {cv::Point2d(s.x - 1, s.y - 1), cv::Point2d(s.x + s.width + 1, s.y - 1),
-                               cv::Point2d(s.x + s.width + 1, s.y + s.height + 1), cv::Point2d(s.x - 1, s.y + s.height + 1)})
+  for (const cv::Point2d& u :
+       {cv::Point2d(s.x - 1, s.y - 1), cv::Point2d(s.x + s.width + 1, s.y - 1),
+        cv::Point2d(s.x + s.width + 1, s.y + s.height + 1), cv::Point2d(s.x - 1, s.y + s.height + 1)})
     corners.push_back(m.family.to_marker_frame(u, m.tag_size));
   std::vector<cv::Point> poly;
-  for (const cv::Point2d& p : cam.project(corners, m.rvec, m.tvec)) poly.emplace_back(cvRound(p.x * 16), cvRound(p.y * 16));
+  for (const cv::Point2d& p : cam.project(corners, m.rvec, m.tvec))
+    poly.emplace_back(cvRound(p.x * 16), cvRound(p.y * 16));
   cv::Mat1b mask(image.size(), uchar(0));
   cv::fillConvexPoly(mask, poly, 255, cv::LINE_8, 4);
   double w = 0, wx = 0, wy = 0;
@@ -40,7 +42,8 @@ TEST(Scene, TruthSitsOnTheRenderedCentroids) {
     double roll, tilt, pan;
     bool distortion;
   };
-  for (const Case& c : {Case{0, 0, 0, false}, Case{30, 40, 20, false}, Case{-70, 20, -35, false}, Case{10, 30, 0, true}}) {
+  for (const Case& c :
+       {Case{0, 0, 0, false}, Case{30, 40, 20, false}, Case{-70, 20, -35, false}, Case{10, 30, 0, true}}) {
     SceneParams p;
     p.camera = Camera::pinhole(500, 500, 319.5, 239.5, 640, 480);
     if (c.distortion) p.camera.distortion = {-0.2, 0.05, 0, 0, 0};

@@ -65,8 +65,8 @@ TEST(NearCandidates, AClusterOfPiecesOnPaperIsLookedAt) {
 
 TEST(NearCandidates, BlobsLettersTexturesAndTakenPlacesAreNot) {
   cv::Mat1b black(120, 300, std::uint8_t(0));
-  black(cv::Rect(10, 10, 20, 20)).setTo(255);  // a solid blob: all ink
-  cv::circle(black, cv::Point(60, 20), 8, 255, 2);  // a letter o: one piece and its hole
+  black(cv::Rect(10, 10, 20, 20)).setTo(255);                       // a solid blob: all ink
+  cv::circle(black, cv::Point(60, 20), 8, 255, 2);                  // a letter o: one piece and its hole
   cv::line(black, cv::Point(100, 10), cv::Point(160, 25), 255, 2);  // a stroke: too thin a box
   EXPECT_TRUE(clusters_of(black).empty());
   // Pieces on a dark ground rather than on paper.
@@ -202,8 +202,8 @@ TEST(NearCandidates, ResolvedMarkersOfLargerFamiliesAreNot) {
   // squares), so neither is looked at; with 4x4 sought the 4x4 is, and with every family
   // both are.
   const Family four(4), five(5);
-  const cv::Mat1b black = resolved_marker(four, 3, cv::Size(400, 200), 20, 40) |
-                          resolved_marker(five, 3, cv::Size(400, 200), 220, 40);
+  const cv::Mat1b black =
+      resolved_marker(four, 3, cv::Size(400, 200), 20, 40) | resolved_marker(five, 3, cv::Size(400, 200), 220, 40);
   detail::SecondLook upto3, upto4;
   upto3.sought = 0b1100, upto4.sought = 0b11100;  // bit n: n x n
   EXPECT_TRUE(clusters_of(black, {}, upto3).empty());
@@ -282,7 +282,7 @@ TEST(NearCandidates, SharpClustersOfAMarkersSizeAreNotLookedAtAgain) {
       black(cv::Rect(40 + c * cell_w, 40 + r * cell_h, w * cell_w, h * cell_h)).setTo(255);
     };
     ink(0, 0, 8, 1), ink(0, 7, 8, 1), ink(0, 1, 1, 6), ink(7, 1, 1, 6);  // the border
-    ink(2, 2, 1, 1), ink(4, 2, 2, 1), ink(2, 4, 2, 2), ink(5, 4, 1, 2);   // data blobs
+    ink(2, 2, 1, 1), ink(4, 2, 2, 1), ink(2, 4, 2, 2), ink(5, 4, 1, 2);  // data blobs
     return black;
   };
   const cv::Mat1b large = pattern(12, 12), small = pattern(6, 6);
@@ -346,7 +346,8 @@ TEST(SecondLookPatch, ReopensOnePixelGapsBesideABrightMargin) {
 
   const std::vector<cv::Rect> boxes = detail::near_candidates(tree, binary, view, detail::SecondLook{}, {});
   ASSERT_EQ(boxes.size(), 1u);
-  const cv::Rect truth = cv::boundingRect(std::vector<cv::Point2f>(scene.truth[0].corners.begin(), scene.truth[0].corners.end()));
+  const cv::Rect truth =
+      cv::boundingRect(std::vector<cv::Point2f>(scene.truth[0].corners.begin(), scene.truth[0].corners.end()));
   EXPECT_GE((boxes[0] & truth).area(), truth.area() / 2);
 
   detail::Patch patch;

@@ -34,8 +34,8 @@ TEST(TagId, RandomValuesRoundTrip) {
 }
 
 TEST(TagId, RejectsBadText) {
-  for (const char* bad : {"", "abc", "12a", "-1", "0x", "0xg", "1.5", " 1",
-                          "340282366920938463463374607431768211456", "0x100000000000000000000000000000000"})
+  for (const char* bad : {"", "abc", "12a", "-1", "0x", "0xg", "1.5", " 1", "340282366920938463463374607431768211456",
+                          "0x100000000000000000000000000000000"})
     EXPECT_THROW(TagId::parse(bad), std::invalid_argument) << bad;
 }
 

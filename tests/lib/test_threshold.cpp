@@ -91,8 +91,9 @@ TEST(Threshold, PowerOfTwoWindowsRoundTheirMeansAsTheBoxFilter) {
         cv::Mat mean;
         BinaryImage b;
         threshold_mean(ImageView(grey), window, offset, mean, b);
-        expect_bits(b, reference(grey, window, offset),
-                    "M=" + std::to_string(window) + " base " + std::to_string(base) + " offset " + std::to_string(offset));
+        expect_bits(
+            b, reference(grey, window, offset),
+            "M=" + std::to_string(window) + " base " + std::to_string(base) + " offset " + std::to_string(offset));
       }
     }
 }

@@ -30,70 +30,52 @@
 #define _GNU_SOURCE
 #include <glib.h>
 #include <link.h>
-#include <stdint.h>
-#include <string.h>
 #include <sanitizer/allocator_interface.h>
 #include <sanitizer/lsan_interface.h>
+#include <stdint.h>
+#include <string.h>
 
 /* GLib's QUARK_BLOCK_SIZE: a quark table holds a multiple of this many pointers. */
 #define QUARK_BLOCK_SIZE 2048
 
 /* libglib's writable data (.data, .bss), where its pointer to the quark table is. */
-static const uintptr_t *glib_data;
+static const uintptr_t* glib_data;
 static size_t glib_data_words;
 
-static int
-find_glib (struct dl_phdr_info *info, size_t size, void *data)
-{
-  (void) size;
-  (void) data;
-  if (!info->dlpi_name || !strstr (info->dlpi_name, "/libglib-2.0.so"))
-    return 0;
+static int find_glib(struct dl_phdr_info* info, size_t size, void* data) {
+  (void)size;
+  (void)data;
+  if (!info->dlpi_name || !strstr(info->dlpi_name, "/libglib-2.0.so")) return 0;
   for (int i = 0; i < info->dlpi_phnum; i++) {
-    const ElfW (Phdr) * segment = &info->dlpi_phdr[i];
+    const ElfW(Phdr)* segment = &info->dlpi_phdr[i];
     if (segment->p_type == PT_LOAD && (segment->p_flags & PF_W)) {
-      glib_data = (const uintptr_t *) (info->dlpi_addr + segment->p_vaddr);
-      glib_data_words = segment->p_memsz / sizeof (uintptr_t);
+      glib_data = (const uintptr_t*)(info->dlpi_addr + segment->p_vaddr);
+      glib_data_words = segment->p_memsz / sizeof(uintptr_t);
       return 1;
     }
   }
   return 0;
 }
 
-static void
-on_malloc (const volatile void *block, size_t size)
-{
-  (void) block;
-  if (size == 0 || size % (QUARK_BLOCK_SIZE * sizeof (gchar *)) != 0)
-    return;
+static void on_malloc(const volatile void* block, size_t size) {
+  (void)block;
+  if (size == 0 || size % (QUARK_BLOCK_SIZE * sizeof(gchar*)) != 0) return;
   /* No allocation and no lock from here on: this runs inside malloc. */
-  const gchar *first = g_quark_to_string (1);
-  if (!first)
-    return;
+  const gchar* first = g_quark_to_string(1);
+  if (!first) return;
   for (size_t i = 0; i < glib_data_words; i++) {
-    const void *table = (const void *) glib_data[i];
-    if (!__sanitizer_get_ownership (table))
-      continue;
-    const size_t bytes = __sanitizer_get_allocated_size (table);
-    if (bytes == 0 || bytes % (QUARK_BLOCK_SIZE * sizeof (gchar *)) != 0)
-      continue;
-    if (((const gchar * const *) table)[1] == first)
-      __lsan_ignore_object (table);
+    const void* table = (const void*)glib_data[i];
+    if (!__sanitizer_get_ownership(table)) continue;
+    const size_t bytes = __sanitizer_get_allocated_size(table);
+    if (bytes == 0 || bytes % (QUARK_BLOCK_SIZE * sizeof(gchar*)) != 0) continue;
+    if (((const gchar* const*)table)[1] == first) __lsan_ignore_object(table);
   }
 }
 
 /* The sanitizer installs a malloc hook only with a free hook. */
-static void
-on_free (const volatile void *block)
-{
-  (void) block;
-}
+static void on_free(const volatile void* block) { (void)block; }
 
-__attribute__((constructor))
-static void
-install (void)
-{
-  dl_iterate_phdr (find_glib, NULL);
-  if (glib_data)
-    __sanitizer_install_malloc_and_free_hooks (on_malloc, on_free);
+__attribute__((constructor)) static void install(void) {
+  dl_iterate_phdr(find_glib, NULL);
+  if (glib_data) __sanitizer_install_malloc_and_free_hooks(on_malloc, on_free);
 }

@@ -12,8 +12,8 @@ namespace lftag {
 
 struct Camera {
   double fx = 0, fy = 0, cx = 0, cy = 0;
-  int width = 0, height = 0;         // 0 when unknown
-  std::vector<double> distortion;    // empty: no distortion
+  int width = 0, height = 0;       // 0 when unknown
+  std::vector<double> distortion;  // empty: no distortion
   // False for the default camera: decoding works, but metric poses assume a guessed focal length.
   bool calibrated = false;
 
@@ -54,8 +54,8 @@ struct Camera {
   // Pixel coordinates -> ideal (undistorted) pixel coordinates of the same camera matrix.
   std::vector<cv::Point2d> undistort(const std::vector<cv::Point2d>& pixels) const;
   // Camera-frame 3-D points -> pixel coordinates, distortion applied.
-  std::vector<cv::Point2d> project(const std::vector<cv::Point3d>& points,
-                                   const cv::Vec3d& rvec = {}, const cv::Vec3d& tvec = {}) const;
+  std::vector<cv::Point2d> project(const std::vector<cv::Point3d>& points, const cv::Vec3d& rvec = {},
+                                   const cv::Vec3d& tvec = {}) const;
 
   // Throws std::invalid_argument when the parameters cannot describe a camera: fx, fy
   // outside [kMinFocal, kMaxFocal], cx, cy outside +-kMaxPrincipal, width or height

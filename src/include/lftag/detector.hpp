@@ -153,8 +153,8 @@ struct DetectorParams {
   // default) selects Camera::default_for(frame): decoding is unaffected; poses are then
   // marked uncalibrated. A camera given here must pass Camera::validate().
   std::optional<Camera> camera;
-  double tag_size = 0.1;   // metres, outer edge of the black border
-  bool refine_pose = true; // iterative refinement of the final pose on all n^2 centroids
+  double tag_size = 0.1;    // metres, outer edge of the black border
+  bool refine_pose = true;  // iterative refinement of the final pose on all n^2 centroids
   // The planar pose's two solutions (see Detection::ambiguity_ratio) are told apart by how
   // well they fit the n^2 centroids, and, when the other fits within this factor of the
   // best, by the squares' foreshortening instead: the side of the marker nearer the camera

@@ -40,7 +40,7 @@ class Family {
 
   int n() const { return n_; }
   std::string name() const;
-  int side() const { return 6 * (n_ + 1); }   // S, the outer edge in units
+  int side() const { return 6 * (n_ + 1); }  // S, the outer edge in units
   int cell_count() const { return n_ * n_; }
   int data_cell_count() const { return n_ * n_ - 2; }
 

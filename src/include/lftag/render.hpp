@@ -22,13 +22,12 @@ namespace lftag {
 // Pixel centres are at integer coordinates; cell (0, 0) starts at image point `origin`
 // (so origin (-0.5, -0.5) puts it at the top-left corner of the image) and each cell is
 // `pixels_per_cell` pixels wide. Pixels outside the grid get `outside`.
-cv::Mat1f resample_cells(const cv::Mat1f& cells, cv::Size image_size, double pixels_per_cell,
-                         cv::Point2d origin, float outside = 1.0f);
+cv::Mat1f resample_cells(const cv::Mat1f& cells, cv::Size image_size, double pixels_per_cell, cv::Point2d origin,
+                         float outside = 1.0f);
 
 // A fronto-parallel marker image at `pixels_per_unit` with a white margin of
 // `margin_units` around the black border, by exact area coverage (0 black, 255 white).
-cv::Mat1b rasterize_marker(const Family& family, TagId id, double pixels_per_unit,
-                           double margin_units = 2.0);
+cv::Mat1b rasterize_marker(const Family& family, TagId id, double pixels_per_unit, double margin_units = 2.0);
 
 // ---------------------------------------------------------------------------
 // Printable files
@@ -85,8 +84,8 @@ struct SceneMarker {
   double tag_size = 1.0;  // metres, outer edge of the black border
   cv::Vec3d rvec, tvec;
   double margin_units = 2.0;
-  float black = 0.05f;    // albedo of the ink
-  float white = 0.9f;     // albedo of the paper
+  float black = 0.05f;  // albedo of the ink
+  float white = 0.9f;   // albedo of the paper
 };
 SceneTarget to_target(const SceneMarker& marker);
 
@@ -118,10 +117,10 @@ struct MarkerTruth {
   // centroids fall. They differ from `centers` by the perspective bias (up to ~0.1 px
   // for a 100 px marker tilted 40 degrees).
   std::vector<cv::Point2d> centroids;
-  std::vector<cv::Point2d> corners;    // outer corners of the border, clockwise from top-left
-  cv::Point2d center;                  // the marker's centre
-  bool fully_visible = false;          // in front of the camera and wholly inside the frame
-  double edge_px = 0;                  // mean projected edge of the black border, pixels
+  std::vector<cv::Point2d> corners;  // outer corners of the border, clockwise from top-left
+  cv::Point2d center;                // the marker's centre
+  bool fully_visible = false;        // in front of the camera and wholly inside the frame
+  double edge_px = 0;                // mean projected edge of the black border, pixels
 };
 MarkerTruth make_truth(const Camera& camera, const SceneMarker& marker);
 

@@ -27,38 +27,38 @@ constexpr int kMaxOutlineReads = 32;
 // frame or (with +=) many: the paper's false-positive funnel and timing tables.
 struct DetectionStats {
   std::int64_t frames = 0;
-  std::int64_t regions = 0;            // regions labelled (the frame's and the second looks')
-  std::int64_t topology = 0;           // white regions with n^2..n^2+extra black children
-  std::int64_t area = 0;               // passed the area constraint
-  std::int64_t geometry = 0;           // passed the geometry constraint
-  std::int64_t angle = 0;              // passed the angle constraint
-  std::int64_t collinearity = 0;       // passed the collinearity constraint
-  std::int64_t residual = 0;           // decoded within tau3 and the cell residual bound (a side none of
-                                       // whose hypotheses match the squares' ink stops before)
-  std::int64_t unambiguous = 0;        // no other id fitting within the decoding margin
-  std::int64_t decoded = 0;            // the squares' ink matches the design: detections
-  std::int64_t second_looks = 0;       // patches examined again (see DetectorParams::second_look)
-  std::int64_t second_look_found = 0;  // detections made in them (outline readings included)
-  std::int64_t outline_reads = 0;      // outlines aligned and read where a patch gave no candidate
-  std::int64_t outline_found = 0;      // detections read from outlines
+  std::int64_t regions = 0;                // regions labelled (the frame's and the second looks')
+  std::int64_t topology = 0;               // white regions with n^2..n^2+extra black children
+  std::int64_t area = 0;                   // passed the area constraint
+  std::int64_t geometry = 0;               // passed the geometry constraint
+  std::int64_t angle = 0;                  // passed the angle constraint
+  std::int64_t collinearity = 0;           // passed the collinearity constraint
+  std::int64_t residual = 0;               // decoded within tau3 and the cell residual bound (a side none of
+                                           // whose hypotheses match the squares' ink stops before)
+  std::int64_t unambiguous = 0;            // no other id fitting within the decoding margin
+  std::int64_t decoded = 0;                // the squares' ink matches the design: detections
+  std::int64_t second_looks = 0;           // patches examined again (see DetectorParams::second_look)
+  std::int64_t second_look_found = 0;      // detections made in them (outline readings included)
+  std::int64_t outline_reads = 0;          // outlines aligned and read where a patch gave no candidate
+  std::int64_t outline_found = 0;          // detections read from outlines
   std::int64_t outline_reads_skipped = 0;  // outline reads not made: kMaxOutlineReads was reached
-  std::int64_t expected_reads = 0;     // expected markers (FrameHints) looked for where expected
-  std::int64_t expected_found = 0;     // detections found so
-  std::int64_t skipped_by_budget = 0;  // candidates not decoded: DetectorParams::max_candidates was spent
-  std::int64_t second_looks_skipped = 0;  // clusters not looked at again: max_second_looks or the budget
-  std::int64_t past_deadline = 0;         // frames whose deadline (DetectorParams::deadline_ms) cut their second looks
-  std::int64_t skipped_by_deadline = 0;   // second looks, their candidates and outline reads it cut (one under way
-                                          // included; the second looks of a frame cut before they were sought are
-                                          // not counted)
-  double threshold_ms = 0;             // binarisation
-  double regions_ms = 0;               // topological connected components
-  double candidates_ms = 0;            // topological filtering and vertex estimation
-  double keypoints_ms = 0;             // key points and geometric filtering
-  double hypotheses_ms = 0;            // 16 initial poses and their evaluation
-  double decode_ms = 0;                // decoding
-  double pose_ms = 0;                  // final pose
-  double second_look_ms = 0;           // finding, enlarging, binarising and labelling the patches
-  double expected_ms = 0;              // reading the expected markers (FrameHints)
+  std::int64_t expected_reads = 0;         // expected markers (FrameHints) looked for where expected
+  std::int64_t expected_found = 0;         // detections found so
+  std::int64_t skipped_by_budget = 0;      // candidates not decoded: DetectorParams::max_candidates was spent
+  std::int64_t second_looks_skipped = 0;   // clusters not looked at again: max_second_looks or the budget
+  std::int64_t past_deadline = 0;          // frames whose deadline (DetectorParams::deadline_ms) cut their second looks
+  std::int64_t skipped_by_deadline = 0;    // second looks, their candidates and outline reads it cut (one under way
+                                           // included; the second looks of a frame cut before they were sought are
+                                           // not counted)
+  double threshold_ms = 0;                 // binarisation
+  double regions_ms = 0;                   // topological connected components
+  double candidates_ms = 0;                // topological filtering and vertex estimation
+  double keypoints_ms = 0;                 // key points and geometric filtering
+  double hypotheses_ms = 0;                // 16 initial poses and their evaluation
+  double decode_ms = 0;                    // decoding
+  double pose_ms = 0;                      // final pose
+  double second_look_ms = 0;               // finding, enlarging, binarising and labelling the patches
+  double expected_ms = 0;                  // reading the expected markers (FrameHints)
   double total_ms() const;
   DetectionStats& operator+=(const DetectionStats& other);
 };
@@ -93,10 +93,10 @@ const char* stage_name(Stage stage);  // "area", "budget", ..., "detected"
 // One topological candidate and its fate (lftag detect --why prints these).
 struct CandidateVerdict {
   Family family{3};
-  bool second_look = false;             // found in an enlarged patch
-  std::vector<cv::Point2d> centroids;   // its n^2 blobs, frame pixels
+  bool second_look = false;            // found in an enlarged patch
+  std::vector<cv::Point2d> centroids;  // its n^2 blobs, frame pixels
   Stage stage = Stage::detected;
-  std::optional<TagId> reading;         // the best reading, when decoding ran
+  std::optional<TagId> reading;             // the best reading, when decoding ran
   double decode_error = 0, worst_cell = 0;  // of that reading
   double noise_margin = 0;                  // of that reading, once accepted
 };
@@ -109,32 +109,32 @@ struct OutlineVerdict {
   bool expected = false;                 // a read where the caller expected a marker (FrameHints)
   std::array<cv::Point2d, 4> outline{};  // the coarse outline read from, frame pixels
   Stage stage = Stage::detected;
-  std::optional<TagId> reading;          // the id read, when reading ran
-  double correlation = 0;                // of the aligned structure (of the start when one
-                                         // far under the resolution bound was not aligned;
-                                         // 0 when it did not align)
-  double marker_correlation = 0;         // of the whole marker of the id read
-  double contrast = 0;                   // white ring minus the cells' cores, grey levels
-                                         // (under a defocus: as the template's blur shows it)
-  double margin = 0;                     // how much worse each cell's runner-up fits (least)
-  double noise_margin = 0;               // the same in standard deviations of the noise
-  double evidence = 0;                   // least share of each cell's predicted difference
-                                         // to its other positions that the image shows
-  double pixels_per_unit = 0;            // along the most foreshortened direction
-  double smear = 0;                      // length of the motion blur found, units
-  double defocus = 0;                    // Gaussian defocus found, units (sigma)
+  std::optional<TagId> reading;   // the id read, when reading ran
+  double correlation = 0;         // of the aligned structure (of the start when one
+                                  // far under the resolution bound was not aligned;
+                                  // 0 when it did not align)
+  double marker_correlation = 0;  // of the whole marker of the id read
+  double contrast = 0;            // white ring minus the cells' cores, grey levels
+                                  // (under a defocus: as the template's blur shows it)
+  double margin = 0;              // how much worse each cell's runner-up fits (least)
+  double noise_margin = 0;        // the same in standard deviations of the noise
+  double evidence = 0;            // least share of each cell's predicted difference
+                                  // to its other positions that the image shows
+  double pixels_per_unit = 0;     // along the most foreshortened direction
+  double smear = 0;               // length of the motion blur found, units
+  double defocus = 0;             // Gaussian defocus found, units (sigma)
 };
 
 // What the stages saw, for debug images (see draw.hpp) and for tuning: filled only on request.
 struct DetectionTrace {
-  cv::Mat binary;                                     // 255 = black, as thresholded
-  std::vector<std::vector<cv::Point2d>> candidates;   // blob centroids of every topological candidate
-  std::vector<std::array<cv::Point2d, 4>> keypoints;  // K0..K3 of candidates that passed the constraints
+  cv::Mat binary;                                                 // 255 = black, as thresholded
+  std::vector<std::vector<cv::Point2d>> candidates;               // blob centroids of every topological candidate
+  std::vector<std::array<cv::Point2d, 4>> keypoints;              // K0..K3 of candidates that passed the constraints
   std::vector<std::vector<std::vector<cv::Point2d>>> hypotheses;  // per candidate: 16 projected inner edges
   std::vector<Detection> detections;
-  std::vector<CandidateVerdict> verdicts;             // every topological candidate
-  std::vector<OutlineVerdict> outline_reads;          // every outline read (and skipped)
-  std::vector<cv::Rect> second_looks;                 // the clusters looked at again
+  std::vector<CandidateVerdict> verdicts;     // every topological candidate
+  std::vector<OutlineVerdict> outline_reads;  // every outline read (and skipped)
+  std::vector<cv::Rect> second_looks;         // the clusters looked at again
 };
 
 }  // namespace lftag

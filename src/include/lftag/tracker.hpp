@@ -85,11 +85,11 @@ extern template class OneEuroFilter<4>;
 
 // The track of a marker as one frame reports it.
 struct TrackInfo {
-  std::uint64_t id = 0;     // from 1, in order of the tracks' starts; never reused by a tracker
+  std::uint64_t id = 0;  // from 1, in order of the tracks' starts; never reused by a tracker
   TrackState state = TrackState::measured;
-  double first_seen = 0;    // seconds: the frame the track started
-  double last_seen = 0;     // seconds: the last frame it was detected in
-  double time = 0;          // seconds: this frame
+  double first_seen = 0;  // seconds: the frame the track started
+  double last_seen = 0;   // seconds: the last frame it was detected in
+  double time = 0;        // seconds: this frame
   double age() const { return time - first_seen; }
   double unseen() const { return time - last_seen; }
   // The detector's pose was replaced by its other solution, the one on the track's
@@ -148,10 +148,10 @@ class Tracker {
   };
   struct Track {
     TrackInfo info;
-    Detection last;               // the last detection
-    std::deque<Sample> history;   // the last poses, newest last
+    Detection last;              // the last detection
+    std::deque<Sample> history;  // the last poses, newest last
     OneEuroFilter<3> translation;
-    OneEuroFilter<4> rotation;    // a unit quaternion, kept on one hemisphere
+    OneEuroFilter<4> rotation;  // a unit quaternion, kept on one hemisphere
     cv::Vec4d last_quaternion;
     // The planar pose's two solutions followed from frame to frame (the last poses of
     // each, newest last; the second is empty until a detection had an alternative), the

@@ -11,6 +11,7 @@
 // frames missing, timestamps out of order, a file cut short) is annotated as far as it
 // decodes, with a warning for each problem and their counts in the summary; --strict makes
 // it exit status 3.
+#include <unistd.h>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -27,7 +28,6 @@
 #include <sstream>
 #include <string>
 #include <tuple>
-#include <unistd.h>
 #include <vector>
 
 #include <glib-unix.h>
@@ -322,7 +322,7 @@ class Annotator {
   GMainLoop* loop_ = nullptr;
   int status_ = 0;
   std::string error_;
-  std::vector<std::string> missing_;  // decoders and demuxers GStreamer said it lacks
+  std::vector<std::string> missing_;       // decoders and demuxers GStreamer said it lacks
   std::vector<std::string> missing_caps_;  // the streams they were for
   bool video_linked_ = false;
   bool tty_ = false, progress_shown_ = false;
@@ -395,12 +395,13 @@ void Annotator::build() {
   // of damage in the file.
   gst_segment_init(&segment_, GST_FORMAT_TIME);
   GstPad* decoded = gst_element_get_static_pad(queue, "sink");
-  gst_pad_add_probe(decoded, GstPadProbeType(GST_PAD_PROBE_TYPE_BUFFER | GST_PAD_PROBE_TYPE_EVENT_DOWNSTREAM),
-                    [](GstPad*, GstPadProbeInfo* info, gpointer self) {
-                      static_cast<Annotator*>(self)->on_decoded(info);
-                      return GST_PAD_PROBE_OK;
-                    },
-                    this, nullptr);
+  gst_pad_add_probe(
+      decoded, GstPadProbeType(GST_PAD_PROBE_TYPE_BUFFER | GST_PAD_PROBE_TYPE_EVENT_DOWNSTREAM),
+      [](GstPad*, GstPadProbeInfo* info, gpointer self) {
+        static_cast<Annotator*>(self)->on_decoded(info);
+        return GST_PAD_PROBE_OK;
+      },
+      this, nullptr);
   gst_object_unref(decoded);
 
   // The detector, as `lftag detect` would be set up.
@@ -431,11 +432,12 @@ void Annotator::build() {
   if (tag_size_given_) g_object_set(detect, "tag-size", o_.tag_size, nullptr);
 
   GstPad* pad = gst_element_get_static_pad(detect, "src");
-  gst_pad_add_probe(pad, GST_PAD_PROBE_TYPE_BUFFER,
-                    [](GstPad*, GstPadProbeInfo* info, gpointer self) {
-                      return static_cast<Annotator*>(self)->on_buffer(GST_PAD_PROBE_INFO_BUFFER(info));
-                    },
-                    this, nullptr);
+  gst_pad_add_probe(
+      pad, GST_PAD_PROBE_TYPE_BUFFER,
+      [](GstPad*, GstPadProbeInfo* info, gpointer self) {
+        return static_cast<Annotator*>(self)->on_buffer(GST_PAD_PROBE_INFO_BUFFER(info));
+      },
+      this, nullptr);
   gst_object_unref(pad);
 
   GstElement* last = detect;
@@ -471,23 +473,24 @@ void Annotator::build() {
 
   if (out_.encoder->configure) {
     GstPad* sinkpad = gst_element_get_static_pad(encoder_, "sink");
-    gst_pad_add_probe(sinkpad, GST_PAD_PROBE_TYPE_EVENT_DOWNSTREAM,
-                      [](GstPad*, GstPadProbeInfo* info, gpointer self) {
-                        GstEvent* event = GST_PAD_PROBE_INFO_EVENT(info);
-                        GstVideoInfo vinfo;
-                        if (GST_EVENT_TYPE(event) == GST_EVENT_CAPS) {
-                          GstCaps* caps = nullptr;
-                          gst_event_parse_caps(event, &caps);
-                          if (gst_video_info_from_caps(&vinfo, caps)) {
-                            auto* a = static_cast<Annotator*>(self);
-                            Shape shape{GST_VIDEO_INFO_WIDTH(&vinfo), GST_VIDEO_INFO_HEIGHT(&vinfo),
-                                        vinfo.fps_d > 0 ? double(vinfo.fps_n) / vinfo.fps_d : 0.0};
-                            a->out_.encoder->configure(a->encoder_, shape);
-                          }
-                        }
-                        return GST_PAD_PROBE_OK;
-                      },
-                      this, nullptr);
+    gst_pad_add_probe(
+        sinkpad, GST_PAD_PROBE_TYPE_EVENT_DOWNSTREAM,
+        [](GstPad*, GstPadProbeInfo* info, gpointer self) {
+          GstEvent* event = GST_PAD_PROBE_INFO_EVENT(info);
+          GstVideoInfo vinfo;
+          if (GST_EVENT_TYPE(event) == GST_EVENT_CAPS) {
+            GstCaps* caps = nullptr;
+            gst_event_parse_caps(event, &caps);
+            if (gst_video_info_from_caps(&vinfo, caps)) {
+              auto* a = static_cast<Annotator*>(self);
+              Shape shape{GST_VIDEO_INFO_WIDTH(&vinfo), GST_VIDEO_INFO_HEIGHT(&vinfo),
+                          vinfo.fps_d > 0 ? double(vinfo.fps_n) / vinfo.fps_d : 0.0};
+              a->out_.encoder->configure(a->encoder_, shape);
+            }
+          }
+          return GST_PAD_PROBE_OK;
+        },
+        this, nullptr);
     gst_object_unref(sinkpad);
   }
 }
@@ -575,8 +578,9 @@ void Annotator::on_decoded(GstPadProbeInfo* info) {
     return watch_.has_rate() ? " (frame " + std::to_string(watch_.index(at)) + ")" : std::string();
   };
   if (decoded_any_ && GST_BUFFER_FLAG_IS_SET(buffer, GST_BUFFER_FLAG_DISCONT))
-    report_damage("decoder", 0, "damaged data in '" + o_.input + "': decoding resumed at " + position_text(t) +
-                                    frame(t) + " after an error");
+    report_damage(
+        "decoder", 0,
+        "damaged data in '" + o_.input + "': decoding resumed at " + position_text(t) + frame(t) + " after an error");
   decoded_any_ = true;
   const std::optional<TimestampWatch::Finding> found = watch_.frame(t, duration);
   if (!found) return;
@@ -596,10 +600,10 @@ void Annotator::on_decoded(GstPadProbeInfo* info) {
 // From either thread: one damage warning, counted and printed in the main thread.
 void Annotator::report_damage(const char* kind, std::int64_t missing, const std::string& text) {
   gst_element_post_message(
-      pipeline_, gst_message_new_application(GST_OBJECT(pipeline_),
-                                             gst_structure_new("lftag-damage", "kind", G_TYPE_STRING, kind, "missing",
-                                                               G_TYPE_INT64, missing, "text", G_TYPE_STRING,
-                                                               text.c_str(), nullptr)));
+      pipeline_,
+      gst_message_new_application(
+          GST_OBJECT(pipeline_), gst_structure_new("lftag-damage", "kind", G_TYPE_STRING, kind, "missing", G_TYPE_INT64,
+                                                   missing, "text", G_TYPE_STRING, text.c_str(), nullptr)));
 }
 
 void Annotator::count_damage(const GstStructure* s) {
@@ -678,7 +682,8 @@ bool Annotator::on_message(GstMessage* message) {
       gst_message_parse_error(message, &error, &debug);
       std::string why = error->message;
       while (!why.empty() && (why.back() == '.' || why.back() == '\n')) why.pop_back();
-      const bool from_decoder = GST_MESSAGE_SRC(message) && gst_object_has_as_ancestor(GST_MESSAGE_SRC(message), GST_OBJECT(decode_));
+      const bool from_decoder =
+          GST_MESSAGE_SRC(message) && gst_object_has_as_ancestor(GST_MESSAGE_SRC(message), GST_OBJECT(decode_));
       if (!missing_.empty()) {
         // What to install first; the stream's caps only after it, with LFTAG_DEBUG.
         std::string what;
@@ -745,8 +750,7 @@ bool Annotator::on_message(GstMessage* message) {
         g_main_loop_quit(loop_);
       }
       break;
-    default:
-      break;
+    default: break;
   }
   return true;
 }
@@ -765,8 +769,7 @@ void Annotator::progress(bool final) {
   const double fps = elapsed > 0 ? frames / elapsed : 0;
 
   std::ostringstream line;
-  if (fraction >= 0)
-    line << std::setw(3) << int(fraction * 100) << " %  ";
+  if (fraction >= 0) line << std::setw(3) << int(fraction * 100) << " %  ";
   line << frames << " frames  " << std::fixed << std::setprecision(1) << fps << " fps  ";
   if (final)
     line << clock_text(elapsed);
@@ -793,8 +796,8 @@ void Annotator::progress(bool final) {
 void Annotator::summary(double seconds) {
   if (o_.quiet) return;
   const std::uint64_t frames = frames_;
-  std::cerr << "lftag annotate: " << frames << " frames in " << std::fixed << std::setprecision(1) << seconds
-            << " s (" << (seconds > 0 ? frames / seconds : 0.0) << " frames per second)\n";
+  std::cerr << "lftag annotate: " << frames << " frames in " << std::fixed << std::setprecision(1) << seconds << " s ("
+            << (seconds > 0 ? frames / seconds : 0.0) << " frames per second)\n";
   std::lock_guard<std::mutex> lock(seen_lock_);
   if (seen_.empty()) {
     std::cerr << "  no markers found\n";
@@ -809,8 +812,8 @@ void Annotator::summary(double seconds) {
     const std::size_t shown = std::min<std::size_t>(rows.size(), 20);
     std::cerr << "  " << rows.size() << (rows.size() == 1 ? " marker" : " markers") << " (frames seen in):";
     for (std::size_t i = 0; i < shown; ++i)
-      std::cerr << (i ? "," : "") << " " << rows[i].first.first << " " << rows[i].first.second << " ("
-                << rows[i].second << ")";
+      std::cerr << (i ? "," : "") << " " << rows[i].first.first << " " << rows[i].first.second << " (" << rows[i].second
+                << ")";
     if (shown < rows.size()) std::cerr << " and " << rows.size() - shown << " more";
     std::cerr << "\n";
   }
@@ -861,13 +864,15 @@ int Annotator::run() {
   loop_ = g_main_loop_new(nullptr, FALSE);
   GstBus* bus = gst_element_get_bus(pipeline_);
   const guint watch = gst_bus_add_watch(
-      bus, [](GstBus*, GstMessage* m, gpointer self) -> gboolean { return static_cast<Annotator*>(self)->on_message(m); },
+      bus,
+      [](GstBus*, GstMessage* m, gpointer self) -> gboolean { return static_cast<Annotator*>(self)->on_message(m); },
       this);
   gst_object_unref(bus);
   tty_ = isatty(STDERR_FILENO);
   start_ = last_line_ = std::chrono::steady_clock::now();
   const guint timer = g_timeout_add(
-      tty_ ? 250 : 1000, [](gpointer self) -> gboolean {
+      tty_ ? 250 : 1000,
+      [](gpointer self) -> gboolean {
         static_cast<Annotator*>(self)->progress(false);
         return G_SOURCE_CONTINUE;
       },
@@ -967,7 +972,8 @@ void add_annotate_command(CLI::App& app, int& status) {
   cmd->callback([opt, tag_size, &status] {
     const Options& o = *opt;
     try {
-      if (o.output.empty() && o.jsonl.empty()) throw std::invalid_argument("nothing to write: give --output, --jsonl or both");
+      if (o.output.empty() && o.jsonl.empty())
+        throw std::invalid_argument("nothing to write: give --output, --jsonl or both");
       Family::parse_list(o.families);
       if (!o.overlay.empty()) overlay_flags(o.overlay);
       if (!o.tracking && (o.smoothing || o.lost_after != Options().lost_after ||
@@ -977,10 +983,10 @@ void add_annotate_command(CLI::App& app, int& status) {
       check_camera_options(o);
       // lftagdetect's ranges, narrower than the still-image tool's.
       using Range = std::tuple<const char*, std::optional<double>, double, double>;
-      for (const auto& [name, value, lo, hi] : {Range{"--fx", o.pinhole.fx, 1e-3, 1e6}, Range{"--fy", o.pinhole.fy, 1e-3, 1e6},
-                                                  Range{"--cx", o.pinhole.cx, 0.0, 1e6},
-                                                  Range{"--cy", o.pinhole.cy, 0.0, 1e6},
-                                                  Range{"--tag-size", o.tag_size, 1e-3, 100.0}})
+      for (const auto& [name, value, lo, hi] :
+           {Range{"--fx", o.pinhole.fx, 1e-3, 1e6}, Range{"--fy", o.pinhole.fy, 1e-3, 1e6},
+            Range{"--cx", o.pinhole.cx, 0.0, 1e6}, Range{"--cy", o.pinhole.cy, 0.0, 1e6},
+            Range{"--tag-size", o.tag_size, 1e-3, 100.0}})
         if (value && (*value < lo || *value > hi))
           throw std::invalid_argument(std::string(name) + " must be from " + CLI::detail::to_string(lo) + " to " +
                                       CLI::detail::to_string(hi) + " for video");
@@ -994,8 +1000,8 @@ void add_annotate_command(CLI::App& app, int& status) {
     if (o.input.find("://") == std::string::npos) {
       std::error_code error;
       if (!fs::is_regular_file(o.input, error)) {
-        std::cerr << "lftag annotate: cannot read '" << o.input << "': "
-                  << (fs::exists(o.input, error) ? "not a file" : "no such file") << "\n";
+        std::cerr << "lftag annotate: cannot read '" << o.input
+                  << "': " << (fs::exists(o.input, error) ? "not a file" : "no such file") << "\n";
         status = 1;
         return;
       }

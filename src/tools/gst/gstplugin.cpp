@@ -26,7 +26,8 @@ std::string init_gstreamer_with_plugin() {
   if (!have("lftagdetect")) gst_registry_scan_path(gst_registry_get(), LFTAG_PLUGIN_INSTALL_DIR);
   if (!have("lftagdetect"))
     return "the lftag GStreamer plugin (libgstlftag.so) is not installed: run `meson install`, or set "
-           "GST_PLUGIN_PATH to the folder that holds it (" LFTAG_PLUGIN_INSTALL_DIR " when installed; from a "
+           "GST_PLUGIN_PATH to the folder that holds it (" LFTAG_PLUGIN_INSTALL_DIR
+           " when installed; from a "
            "build tree, run the tool under `meson devenv -C build`)";
   if (!have("lftagpublish")) {
     GstPlugin* plugin = gst_registry_find_plugin(gst_registry_get(), "lftag");
