@@ -36,7 +36,6 @@ namespace {
 
 constexpr double kTagSize = 0.1;                    // metres
 constexpr double kSheet = 1 + 2 * kMarginFraction;  // printed sheet edge over tag size
-constexpr int kMaxMarkers = 10;                     // per frame, any condition
 constexpr int kIdsPerSet = 30;                      // each set its own ids
 constexpr int kJpegQuality = 75;
 constexpr double kMaxShake = 2;  // pixels the camera shake moves the image, per frame

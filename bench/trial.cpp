@@ -6,6 +6,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "lftag/tracker.hpp"  // rotation_angle
+
 namespace bench {
 
 lftag::Camera paper_camera() { return lftag::Camera::pinhole(320, 320, 319.5, 239.5, 640, 480); }
@@ -65,14 +67,7 @@ double edge_px(const lftag::Camera& camera, const Pose& pose, double tag_size) {
   return sum / 4;
 }
 
-double rotation_error_deg(const cv::Vec3d& a, const cv::Vec3d& b) {
-  cv::Matx33d ra, rb;
-  cv::Rodrigues(a, ra);
-  cv::Rodrigues(b, rb);
-  cv::Vec3d diff;
-  cv::Rodrigues(ra * rb.t(), diff);
-  return cv::norm(diff) * 180 / CV_PI;
-}
+double rotation_error_deg(const cv::Vec3d& a, const cv::Vec3d& b) { return lftag::rotation_angle(a, b) * 180 / CV_PI; }
 
 Outcome score(const std::vector<Detected>& detections, const std::string& id, const Pose& truth, double tag_size,
               const lftag::Camera& camera) {

@@ -17,14 +17,6 @@ namespace {
 // exact from any two; more of them average the measurement noise).
 constexpr std::size_t kHistory = 3;
 
-double angle_between(const cv::Vec3d& a, const cv::Vec3d& b) {
-  cv::Matx33d ra, rb;
-  cv::Rodrigues(a, ra);
-  cv::Rodrigues(b, rb);
-  const cv::Matx33d r = ra.t() * rb;
-  return std::acos(std::clamp((r(0, 0) + r(1, 1) + r(2, 2) - 1) / 2, -1.0, 1.0));
-}
-
 // Unit quaternion (w, x, y, z) of a rotation vector, and back.
 cv::Vec4d quaternion(const cv::Vec3d& r) {
   const double angle = cv::norm(r);
@@ -87,6 +79,14 @@ double lead(double evidence, int chain, double margin) {
 }
 
 }  // namespace
+
+double rotation_angle(const cv::Vec3d& a, const cv::Vec3d& b) {
+  cv::Matx33d ra, rb;
+  cv::Rodrigues(a, ra);
+  cv::Rodrigues(b, rb);
+  const cv::Matx33d r = ra.t() * rb;
+  return std::acos(std::clamp((r(0, 0) + r(1, 1) + r(2, 2) - 1) / 2, -1.0, 1.0));
+}
 
 const char* track_state_name(TrackState state) {
   switch (state) {
@@ -234,15 +234,15 @@ void Tracker::choose_pose(Track& track, Detection& d, double time, bool& flipped
   const cv::Vec3d p0 = expected_rotation(chains[0], time);
   int own = 0;
   if (chains[1].empty()) {
-    own = alternative && angle_between(p0, d.alternative_rvec) < angle_between(p0, d.rvec) ? 1 : 0;
+    own = alternative && rotation_angle(p0, d.alternative_rvec) < rotation_angle(p0, d.rvec) ? 1 : 0;
   } else {
     const cv::Vec3d p1 = expected_rotation(chains[1], time);
     if (alternative) {
-      const double kept = angle_between(p0, d.rvec) + angle_between(p1, d.alternative_rvec);
-      const double swapped = angle_between(p0, d.alternative_rvec) + angle_between(p1, d.rvec);
+      const double kept = rotation_angle(p0, d.rvec) + rotation_angle(p1, d.alternative_rvec);
+      const double swapped = rotation_angle(p0, d.alternative_rvec) + rotation_angle(p1, d.rvec);
       own = swapped < kept ? 1 : 0;
     } else {
-      own = angle_between(p1, d.rvec) < angle_between(p0, d.rvec) ? 1 : 0;
+      own = rotation_angle(p1, d.rvec) < rotation_angle(p0, d.rvec) ? 1 : 0;
     }
   }
   auto push = [&](int chain, const cv::Vec3d& rvec, const cv::Vec3d& tvec) {

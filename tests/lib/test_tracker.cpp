@@ -33,15 +33,19 @@ Detection square(TagId id, cv::Point2d origin, double side = 40) {
   return d;
 }
 
-double angle_deg(const cv::Vec3d& a, const cv::Vec3d& b) {
-  cv::Matx33d ra, rb;
-  cv::Rodrigues(a, ra);
-  cv::Rodrigues(b, rb);
-  const cv::Matx33d r = ra.t() * rb;
-  return std::acos(std::clamp((r(0, 0) + r(1, 1) + r(2, 2) - 1) / 2, -1.0, 1.0)) * 180 / CV_PI;
-}
+double angle_deg(const cv::Vec3d& a, const cv::Vec3d& b) { return lftag::rotation_angle(a, b) * 180 / CV_PI; }
 
 }  // namespace
+
+TEST(Tracker, RotationAngleIsTheAngleBetweenTwoOrientations) {
+  EXPECT_NEAR(lftag::rotation_angle({0, 0, 0}, {0, 0, 0.5}), 0.5, 1e-12);
+  EXPECT_NEAR(lftag::rotation_angle({0.3, 0, 0}, {0.3, 0, 0}), 0, 1e-6);
+  // Composed about one axis the angles subtract; about any axis the angle is symmetric.
+  EXPECT_NEAR(lftag::rotation_angle({0, 1.0, 0}, {0, -0.5, 0}), 1.5, 1e-12);
+  const cv::Vec3d a(0.2, -0.4, 1.1), b(-0.7, 0.1, 0.3);
+  EXPECT_NEAR(lftag::rotation_angle(a, b), lftag::rotation_angle(b, a), 1e-12);
+  EXPECT_NEAR(lftag::rotation_angle({0, 0, 0}, {CV_PI, 0, 0}), CV_PI, 1e-9);
+}
 
 TEST(Tracker, MeasuredMarkersKeepTheirTrack) {
   Tracker tracker;

@@ -32,6 +32,10 @@ enum class TrackState {
 };
 const char* track_state_name(TrackState state);  // "measured", "predicted", "lost"
 
+// The angle in radians, 0 to pi, of the rotation between two orientations given as
+// rotation vectors (Rodrigues): how far apart two poses' orientations are.
+double rotation_angle(const cv::Vec3d& a, const cv::Vec3d& b);
+
 struct TrackerParams {
   // Seconds a track may go unseen and still be reported (as predicted); once longer
   // unseen it is lost, reported once, and dropped. 0: lost in the first frame it is
