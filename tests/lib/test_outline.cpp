@@ -772,3 +772,51 @@ TEST(OutlineReading, EveryCellMustShowMostOfTheDifferenceItsDigitMakes) {
     }
   }
 }
+
+// The acceptance checks at their bounds, on a reading of a real far marker with one
+// measurement moved to each side of one bound: a measurement the data put on the wrong
+// side is refused at its own check, and the same reading just inside is accepted. The
+// values are the ones stages.hpp and docs/detector.md give for the bound: true readings
+// align at 0.78 or more as a whole marker; wrong readings above the resolution bound had
+// margins up to 0.022; a contrast of 16 grey levels is what a defocused marker's white
+// ring keeps over its cores where its margins still mean something.
+TEST(OutlineReading, EachCheckRefusesAReadingJustOutsideItsBound) {
+  std::mt19937_64 rng(31);
+  DetectorParams params;
+  const Far far = far_marker(3, 4242, 20, 25);
+  const auto read = read_outline(ImageView(far.scene.image), coarse(far.corners, 1, 0.3, rng), Family(3));
+  ASSERT_TRUE(read);
+  ASSERT_EQ(read->id, TagId(4242));
+  ASSERT_EQ(outline_stage(*read, params), Stage::detected);
+  // Inside every bound, with room: the checks below move one measurement at a time.
+  OutlineReading base = *read;
+  base.correlation = std::max(base.correlation, 0.8);
+  base.marker_correlation = std::max(base.marker_correlation, 0.8);
+  base.contrast = std::max(base.contrast, 40.0);
+  base.margin = std::max(base.margin, 0.1);
+  base.evidence = std::max(base.evidence, 0.6);
+  ASSERT_EQ(outline_stage(base, params), Stage::detected);
+  struct Bound {
+    double OutlineReading::*field;
+    double inside, outside;
+    Stage refused_at;
+    const char* name;
+  };
+  for (const Bound& b : {Bound{&OutlineReading::marker_correlation, 0.78, 0.72, Stage::marker, "marker correlation"},
+                         Bound{&OutlineReading::correlation, 0.78, 0.72, Stage::structure, "structure correlation"},
+                         Bound{&OutlineReading::contrast, 17, 12, Stage::contrast, "contrast"},
+                         Bound{&OutlineReading::margin, 0.032, 0.022, Stage::margin, "margin"},
+                         Bound{&OutlineReading::evidence, 0.41, 0.38, Stage::margin, "evidence"},
+                         Bound{&OutlineReading::baseline_gap, 0.3, 0.2, Stage::baselines, "baseline gap"}}) {
+    OutlineReading r = base;
+    r.*b.field = b.inside;
+    EXPECT_EQ(outline_stage(r, params), Stage::detected) << b.name << " " << b.inside;
+    r.*b.field = b.outside;
+    EXPECT_EQ(outline_stage(r, params), b.refused_at) << b.name << " " << b.outside;
+  }
+  OutlineReading smeared = base;
+  smeared.smear = 4.8;
+  EXPECT_EQ(outline_stage(smeared, params), Stage::detected);
+  smeared.smear = 5.5;
+  EXPECT_EQ(outline_stage(smeared, params), Stage::smear);
+}
