@@ -344,6 +344,19 @@ TEST(Decode, TheNoiseMarginIsTheLeastCellsDistanceFromAnotherDigitInUnitsOfTheBl
       EXPECT_GE(shift, 0.3) << what;
     }
   }
+  // The bound itself (DetectorParams::min_noise_margin, 2): 0.33 u from its place the blob
+  // stands 2.3 scatters from the line and is read; at 0.37 u, 1.7 scatters, inside the 1.2
+  // to 2.0 of the field experiment's wrong ids read by their blobs, it is refused.
+  for (const auto& [shift, accepted] : {std::pair{0.33, true}, std::pair{0.37, false}}) {
+    Prepared moved = scattered;
+    moved.candidate.blobs[p->blob_of_cell[4]].point.x += shift * ppu;
+    DetectionStats stats;
+    const auto d =
+        detail::decode(moved.candidate, moved.keypoints, ImageView(moved.image), moved.camera, loose, stats, nullptr);
+    ASSERT_TRUE(d) << shift;
+    EXPECT_NEAR(d->noise_margin, accepted ? 2.28 : 1.75, 0.1) << shift;
+    EXPECT_EQ(d->verdict, accepted ? detail::Verdict::accepted : detail::Verdict::margin) << shift;
+  }
   // Nearly on the line: never accepted, whichever digit it is nearer to.
   for (double shift : {0.48, 0.52}) {
     Prepared moved = scattered;
