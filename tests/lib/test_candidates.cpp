@@ -595,6 +595,16 @@ TEST(FindCandidates, AreaConstraintOnTheBlobsInk) {
       EXPECT_DOUBLE_EQ(hi / lo, k.side * k.side / 36.0);  // the raw ink ratio
     }
   }
+  // The default, the paper's tau1 of 5 (SPEC 4): the lone 20 x 20 square (4.09) passes,
+  // the 24 x 24 (5.57) does not.
+  for (const auto& [side, passes] : {std::pair{20, true}, std::pair{24, false}}) {
+    std::vector<cv::Rect> all;
+    for (int i = 0; i < 8; ++i) all.emplace_back(10 + (i % 4) * 20, 10 + (i / 4) * 20, 6, 6);
+    all.emplace_back(60, 60, side, side);
+    DetectionStats stats;
+    EXPECT_EQ(run(analyse(boxed(100, 3, all)), params_for({Family(3)}), stats).size(), passes ? 1u : 0u) << side;
+    EXPECT_EQ(stats.area, passes ? 1 : 0) << side;
+  }
   // A real marker (design ratio 16/9) passes, also at a small scale.
   for (double ppu : {1.7, 3.0, 8.0}) {
     const Analysed m = analyse(rasterize_marker(Family(4), 4321, ppu, 2.0));
