@@ -95,16 +95,6 @@ Layout layout_of(int drawn_as) {
   }
 }
 
-double uniform(std::mt19937_64& rng, double lo, double hi) {
-  return std::uniform_real_distribution<double>(lo, hi)(rng);
-}
-
-cv::Matx33d rotation(const cv::Vec3d& axis_angle) {
-  cv::Matx33d r;
-  cv::Rodrigues(axis_angle, r);
-  return r;
-}
-
 // What a sheet carries beyond its pose: its bend, its occluder and its shadow. Image-space
 // shapes are given relative to the marker's image centre and projected edge, so that
 // they follow the sheet through the clip.
@@ -168,23 +158,11 @@ Pose pose_of(const lftag::Camera& camera, const Placement& p) {
   return facing_pose(camera, p.center, p.edge, p.tilt, p.tilt_axis, p.roll, kTagSize);
 }
 
-double tilt_deg(const Pose& pose) {
-  const cv::Vec3d normal = rotation(pose.rvec) * cv::Vec3d(0, 0, 1);
-  return std::acos(std::clamp(normal.dot(cv::normalize(pose.tvec)), -1.0, 1.0)) * 180 / CV_PI;
-}
-
 // A small turn of the camera about its centre between frames (none within one).
 cv::Matx33d random_shake(const lftag::Camera& camera, std::mt19937_64& rng) {
   const double shift = kMaxShake * std::sqrt(uniform(rng, 0, 1)), direction = uniform(rng, 0, 2 * CV_PI);
   const double dx = shift * std::cos(direction), dy = shift * std::sin(direction);
-  return rotation({-std::atan(dy / camera.fy), std::atan(dx / camera.fx), uniform(rng, -0.5, 0.5) / camera.fx});
-}
-
-Pose shaken(const Pose& pose, const cv::Matx33d& shake) {
-  Pose p;
-  cv::Rodrigues(shake * rotation(pose.rvec), p.rvec);
-  p.tvec = shake * pose.tvec;
-  return p;
+  return rotation_matrix({-std::atan(dy / camera.fy), std::atan(dx / camera.fx), uniform(rng, -0.5, 0.5) / camera.fx});
 }
 
 // A point of the sheet (metres from the marker centre, in its plane) in the marker frame:
@@ -492,7 +470,7 @@ lftag::SceneTarget sheet_target(const FiducialSystem& system, const std::string&
   if (e.bend_about_x) {
     // Target point (u, v) is marker point (-v, u).
     cv::rotate(t.albedo, t.albedo, cv::ROTATE_90_COUNTERCLOCKWISE);
-    cv::Rodrigues(rotation(pose.rvec) * rotation({0, 0, CV_PI / 2}), t.rvec);
+    cv::Rodrigues(rotation_matrix(pose.rvec) * rotation_matrix({0, 0, CV_PI / 2}), t.rvec);
   }
   return t;
 }

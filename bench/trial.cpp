@@ -67,6 +67,28 @@ double edge_px(const lftag::Camera& camera, const Pose& pose, double tag_size) {
   return sum / 4;
 }
 
+double uniform(std::mt19937_64& rng, double lo, double hi) {
+  return std::uniform_real_distribution<double>(lo, hi)(rng);
+}
+
+cv::Matx33d rotation_matrix(const cv::Vec3d& axis_angle) {
+  cv::Matx33d r;
+  cv::Rodrigues(axis_angle, r);
+  return r;
+}
+
+double tilt_deg(const Pose& pose) {
+  const cv::Vec3d normal = rotation_matrix(pose.rvec) * cv::Vec3d(0, 0, 1);
+  return std::acos(std::clamp(normal.dot(cv::normalize(pose.tvec)), -1.0, 1.0)) * 180 / CV_PI;
+}
+
+Pose shaken(const Pose& pose, const cv::Matx33d& shake) {
+  Pose p;
+  cv::Rodrigues(shake * rotation_matrix(pose.rvec), p.rvec);
+  p.tvec = shake * pose.tvec;
+  return p;
+}
+
 double rotation_error_deg(const cv::Vec3d& a, const cv::Vec3d& b) { return lftag::rotation_angle(a, b) * 180 / CV_PI; }
 
 Outcome score(const std::vector<Detected>& detections, const std::string& id, const Pose& truth, double tag_size,

@@ -78,6 +78,15 @@ Outcome run_trial(FiducialSystem& system, const lftag::SceneRenderer& renderer, 
 // Angle between two rotations, degrees.
 double rotation_error_deg(const cv::Vec3d& rvec_a, const cv::Vec3d& rvec_b);
 
+// A uniform draw from [lo, hi).
+double uniform(std::mt19937_64& rng, double lo, double hi);
+// The rotation matrix of a rotation vector.
+cv::Matx33d rotation_matrix(const cv::Vec3d& axis_angle);
+// Degrees between a sheet's normal and the line of sight to its centre.
+double tilt_deg(const Pose& pose);
+// A pose seen through a camera turned by `shake` about its centre.
+Pose shaken(const Pose& pose, const cv::Matx33d& shake);
+
 // One value of a swept parameter and how the markers fared there.
 struct Step {
   double value = 0;

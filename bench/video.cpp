@@ -47,16 +47,6 @@ constexpr Plan kFull{24, 30}, kQuick{1, 10};
 const std::vector<double> kEdgeBins{30, 60, 100, 160, 220};  // pixels
 const std::vector<double> kTiltBins{0, 30, 45, 60};          // degrees
 
-double uniform(std::mt19937_64& rng, double lo, double hi) {
-  return std::uniform_real_distribution<double>(lo, hi)(rng);
-}
-
-cv::Matx33d rotation(const cv::Vec3d& axis_angle) {
-  cv::Matx33d r;
-  cv::Rodrigues(axis_angle, r);
-  return r;
-}
-
 // A sheet at the start or end of its motion: the image point its centre is seen at, the
 // mean projected edge of its tag, its tilt out of the plane facing the camera (about an
 // axis across the line of sight at `tilt_axis` degrees in the image) and its roll.
@@ -104,11 +94,12 @@ Pose pose_of(const lftag::Camera& camera, const Placement& p) {
       cv::normalize(cv::Vec3d((p.center.x - camera.cx) / camera.fx, (p.center.y - camera.cy) / camera.fy, 1));
   const cv::Vec3d axis = cv::Vec3d(0, 0, 1).cross(ray);
   const double turn = std::asin(std::min(1.0, cv::norm(axis)));
-  const cv::Matx33d to_ray = rotation(turn > 1e-12 ? axis * (turn / cv::norm(axis)) : cv::Vec3d());
+  const cv::Matx33d to_ray = rotation_matrix(turn > 1e-12 ? axis * (turn / cv::norm(axis)) : cv::Vec3d());
   const double d = CV_PI / 180;
-  const cv::Matx33d tilt = rotation(cv::Vec3d(std::cos(p.tilt_axis * d), std::sin(p.tilt_axis * d), 0) * (p.tilt * d));
+  const cv::Matx33d tilt =
+      rotation_matrix(cv::Vec3d(std::cos(p.tilt_axis * d), std::sin(p.tilt_axis * d), 0) * (p.tilt * d));
   Pose pose;
-  cv::Rodrigues(to_ray * tilt * rotation({0, 0, p.roll * d}), pose.rvec);
+  cv::Rodrigues(to_ray * tilt * rotation_matrix({0, 0, p.roll * d}), pose.rvec);
   // The edge is nearly inverse to the distance (not quite, once tilted): a few corrections.
   double distance = camera.fx * kTagSize / p.edge;
   for (int i = 0; i < 3; ++i) {
@@ -119,12 +110,6 @@ Pose pose_of(const lftag::Camera& camera, const Placement& p) {
   return pose;
 }
 
-// Degrees between the sheet's normal and the line of sight to its centre.
-double tilt_deg(const Pose& pose) {
-  const cv::Vec3d normal = rotation(pose.rvec) * cv::Vec3d(0, 0, 1);
-  return std::acos(std::clamp(normal.dot(cv::normalize(pose.tvec)), -1.0, 1.0)) * 180 / CV_PI;
-}
-
 // Camera shake: a small turn of the camera about its centre, so that the truth stays exact
 // for the markers and the background (a distant scene) moves by a homography. Up to
 // kMaxShake - 1 px of shift in any direction and a roll moving the frame corners by up
@@ -133,14 +118,7 @@ cv::Matx33d random_shake(const lftag::Camera& camera, std::mt19937_64& rng) {
   const double shift = (kMaxShake - 1) * std::sqrt(uniform(rng, 0, 1)), direction = uniform(rng, 0, 2 * CV_PI);
   const double roll = uniform(rng, -1, 1) / std::hypot(camera.cx, camera.cy);
   const double dx = shift * std::cos(direction), dy = shift * std::sin(direction);
-  return rotation({-std::atan(dy / camera.fy), std::atan(dx / camera.fx), roll});
-}
-
-Pose shaken(const Pose& pose, const cv::Matx33d& shake) {
-  Pose p;
-  cv::Rodrigues(shake * rotation(pose.rvec), p.rvec);
-  p.tvec = shake * pose.tvec;
-  return p;
+  return rotation_matrix({-std::atan(dy / camera.fy), std::atan(dx / camera.fx), roll});
 }
 
 // The image box of a sheet (tag and margin), or an empty box when it leaves the frame.
