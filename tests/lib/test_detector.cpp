@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "lftag/detector.hpp"
+#include "lftag/image_file.hpp"
 #include "lftag/render.hpp"
 #include "lftag/trace.hpp"
 #include "scenes.hpp"
@@ -783,4 +784,30 @@ TEST(Detector, ExpectedMarkersAreTakenOnlyAsExpected) {
     }
   }
   EXPECT_STREQ(stage_name(Stage::unexpected), "unexpected");
+}
+
+// DetectorParams::min_decode_margin (2) at its bound, on a frame of the range sweep: a
+// 3x3 of id 2076 at 29.1 m (11 px) in the paper's camera. Its blobs read 2588 with
+// another hypothesis's id fitting within 2 times as well: refused at the margin, and the
+// outline reading then reads the printed id. With a margin of 1.5 the blobs' 2588 stood,
+// the range sweep's one wrong id.
+TEST(Detector, ARivalIdWithinTheDecodingMarginRejectsTheBlobsReading) {
+  const cv::Mat1b frame = read_grey_image(std::string(LFTAG_TEST_DATA) + "/range-3x3-id2076-29.1m.png");
+  ASSERT_FALSE(frame.empty());
+  DetectorParams p;
+  p.families = {Family(3)};
+  p.camera = paper_camera();
+  DetectionTrace trace;
+  const std::vector<Detection> found = Detector(p).detect(ImageView(frame), nullptr, &trace);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_EQ(found[0].id, TagId(2076));
+  EXPECT_TRUE(found[0].from_outline);
+  bool refused = false;
+  for (const CandidateVerdict& v : trace.verdicts) refused |= v.stage == Stage::margin && v.reading == TagId(2588);
+  EXPECT_TRUE(refused) << "the blobs' reading 2588 is refused at the margin";
+
+  p.min_decode_margin = 1.5;
+  const std::vector<Detection> loose = Detector(p).detect(ImageView(frame));
+  ASSERT_EQ(loose.size(), 1u);
+  EXPECT_EQ(loose[0].id, TagId(2588)) << "the wrong id a looser margin lets through";
 }
