@@ -30,10 +30,6 @@ constexpr double kTemplateScale = 3;  // template pixels per unit
 constexpr double kRing = 1;           // units of the white margin the template assumes outside
 // Defocus blurs sought beyond the template's own, Gaussian sigmas in units.
 constexpr std::array<double, 3> kDefocusUnits = {0.7, 1.1, 1.5};
-// A defocused reading's least worsening of the fit, over its residuals' variance: a
-// runner-up 5 standard deviations of the noise away. Measured: true readings 17 to 900,
-// misreadings of dim (25 grey levels) defocused markers 7 to 10.
-constexpr double kMinDefocusGainOverVariance = 25;
 // From this ratio of a defocus's longest axis in the template to its geometric mean
 // (1 / sqrt(cos tilt): tilts of about 37 degrees), the defocus is sought uneven.
 constexpr double kMinDefocusStretch = 1.12;
@@ -640,9 +636,7 @@ class PixelModel {
   struct Reading {
     TagId id;
     double margin = 0;
-    double smear = 0;  // length of the motion blur that fits best, frame pixels
-    // The least worsening over the variance of the best fit's residuals (noise and misfit).
-    double gain_over_variance = 0;
+    double smear = 0;         // length of the motion blur that fits best, frame pixels
     double noise_margin = 0;  // OutlineReading::noise_margin
     double evidence = 0;      // OutlineReading::evidence
   };
@@ -682,12 +676,8 @@ class PixelModel {
     }
     if (best_fixed.empty()) return best;
     const Fit fit = fit_at(best_blur * pixels_per_unit, best_fixed, best_squares, start, true);
-    best = {fit.id,
-            fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
-            cv::norm(smear_) * best_scale,
-            fit.rss > 0 ? fit.least_gain / (fit.rss / fit.samples) : 0,
-            fit.noise_margin,
-            fit.evidence};
+    best = {fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
+            cv::norm(smear_) * best_scale, fit.noise_margin, fit.evidence};
     if (!(fit.ink > 0.4 * contrast)) best.margin = 0;
     return best;
   }
@@ -711,7 +701,7 @@ class PixelModel {
   };
   struct Fit {
     TagId id;
-    double rss = 0, ink = 0, least_gain = 0, samples = 0;
+    double rss = 0, ink = 0, least_gain = 0;
     double noise_margin = 0;  // Reading::noise_margin
     double evidence = 0;      // Reading::evidence
   };
@@ -795,7 +785,6 @@ class PixelModel {
     }
     Fit fit;
     fit.rss = sums.rss(&fit.ink);
-    fit.samples = sums.n;
     for (std::size_t i = 0; i < cells_.size(); ++i) fit.id = fit.id.with_digit(family_.data_index(cells_[i]), digit[i]);
     if (!margins) return fit;
     fit.least_gain = std::numeric_limits<double>::infinity();
@@ -1398,17 +1387,12 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     const TagId sampled = read_cells(image, under, family, out.pixels_per_unit, white - black).first;
     return model.read(sampled, out.pixels_per_unit, white - black);
   };
-  // Under a defocus found the contrast seen collapses, and a margin measured against it
-  // says little: the reading must also stand clear of the frame's noise.
-  const auto margin_of = [&](const PixelModel::Reading& r) {
-    return defocus > 0 && r.gain_over_variance < kMinDefocusGainOverVariance ? 0.0 : r.margin;
-  };
   if (deadline.passed()) return cut(out);
   const auto reading = read_id(h);
   if (!reading) return std::nullopt;
   out.read = true;
   out.id = reading->id;
-  out.margin = margin_of(*reading);
+  out.margin = reading->margin;
   out.noise_margin = reading->noise_margin;
   out.evidence = reading->evidence;
   out.smear = reading->smear / out.pixels_per_unit;
@@ -1450,14 +1434,14 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     const auto again = read_id(final_h);
     if (!again) return std::nullopt;
     if (again->id == out.id) {
-      out.margin = std::min(out.margin, margin_of(*again));
+      out.margin = std::min(out.margin, again->margin);
       out.noise_margin = std::min(out.noise_margin, again->noise_margin);
       out.evidence = again->evidence;  // the final alignment's: the first reading's is a start
       out.smear = std::max(out.smear, again->smear / out.pixels_per_unit);
       return out;
     }
     out.id = again->id;
-    out.margin = margin_of(*again);
+    out.margin = again->margin;
     out.noise_margin = again->noise_margin;
     out.evidence = again->evidence;
     out.smear = again->smear / out.pixels_per_unit;

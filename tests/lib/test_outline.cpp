@@ -316,8 +316,8 @@ TEST(OutlineReading, MarkersDefocusedBeyondTheBlursSoughtFailTheContrastCheck) {
 TEST(OutlineReading, DimDefocusedMarkersAreNeverMisread) {
   // The same markers printed in grey on grey (ink 0.3, paper 0.4 to 0.45: 25 to 38 grey
   // levels), from 9.5 to 10.5 m. The contrast seen is a few grey levels and margins
-  // measured against it let misreadings through: a defocused reading must also stand 5
-  // standard deviations of its residuals clear of its runner-up. Some are read, none wrongly.
+  // measured against it let misreadings through: the evidence check, measured against the
+  // model's own prediction, refuses them. Some are read, none wrongly.
   std::mt19937_64 rng(22);
   DetectorParams params;
   int accepted = 0;
