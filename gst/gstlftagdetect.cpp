@@ -120,6 +120,7 @@
 #include "detectmetas.h"
 #include "detectoverlay.h"
 #include "elementcamera.h"
+#include "elementtunables.h"
 #include "metaconversion.h"
 #include "propertystate.h"
 #include "tunables.hpp"
@@ -372,23 +373,7 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                            "poses, about 2.3 KB a marker) at the end of each \"lftag\" message; by default "
                            "a message holds the timestamps, ids, centres, appeared, vanished and frame size only",
                            DEFAULT_PROP_MESSAGE_DETECTIONS, playing));
-  for (guint i = 0; i < lftag::io::kTunables; ++i) {
-    const lftag::io::Tunable& t = lftag::io::tunables()[i];
-    const double value = t.get(defaults);
-    GParamSpec* spec = nullptr;
-    switch (t.kind) {
-      case lftag::io::Tunable::Kind::integer:
-        spec = g_param_spec_int(t.name, t.nick, t.blurb, gint(t.min), gint(t.max), gint(value), playing);
-        break;
-      case lftag::io::Tunable::Kind::real:
-        spec = g_param_spec_double(t.name, t.nick, t.blurb, t.min, t.max, value, playing);
-        break;
-      case lftag::io::Tunable::Kind::boolean:
-        spec = g_param_spec_boolean(t.name, t.nick, t.blurb, value != 0, playing);
-        break;
-    }
-    g_object_class_install_property(gobject_class, PROP_TUNABLE + i, spec);
-  }
+  lftag::gst::install_tunable_properties(gobject_class, PROP_TUNABLE, defaults, playing);
   g_object_class_install_property(
       gobject_class, PROP_LATE_FRAMES,
       g_param_spec_enum("late-frames", "Late frames",
@@ -532,11 +517,7 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
   GST_OBJECT_LOCK(self);
   Settings& s = *self->settings;
   if (const lftag::io::Tunable* t = tunable(prop_id)) {
-    switch (t->kind) {
-      case lftag::io::Tunable::Kind::integer: t->set(s.detector, g_value_get_int(value)); break;
-      case lftag::io::Tunable::Kind::real: t->set(s.detector, g_value_get_double(value)); break;
-      case lftag::io::Tunable::Kind::boolean: t->set(s.detector, g_value_get_boolean(value)); break;
-    }
+    lftag::gst::set_tunable(*t, value, s.detector);
     GST_OBJECT_UNLOCK(self);
     return;
   }
@@ -573,12 +554,7 @@ static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue
   if (const auto which = camera_property(prop_id)) {
     lftag::gst::get_camera_property(s.camera, *which, value);
   } else if (const lftag::io::Tunable* t = tunable(prop_id)) {
-    const double v = t->get(s.detector);
-    switch (t->kind) {
-      case lftag::io::Tunable::Kind::integer: g_value_set_int(value, gint(v)); break;
-      case lftag::io::Tunable::Kind::real: g_value_set_double(value, v); break;
-      case lftag::io::Tunable::Kind::boolean: g_value_set_boolean(value, v != 0); break;
-    }
+    lftag::gst::get_tunable(*t, s.detector, value);
   } else {
     switch (prop_id) {
       case PROP_FAMILIES: g_value_set_string(value, s.families_text.c_str()); break;

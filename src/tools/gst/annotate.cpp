@@ -36,6 +36,7 @@
 #include <gst/video/video.h>
 
 #include "../commands.hpp"
+#include "elementtunables.h"
 #include "gstplugin.hpp"
 #include "lftag-meta.h"
 #include "lftag/camera.hpp"
@@ -412,14 +413,7 @@ void Annotator::build() {
   set(detect, "families", o_.families);
   set(detect, "messages", "none");
   set(detect, "overlay", overlay.empty() ? "0" : overlay);
-  for (const io::Tunable& t : io::tunables()) {
-    const double value = t.get(o_.params);
-    switch (t.kind) {
-      case io::Tunable::Kind::integer: g_object_set(detect, t.name, gint(value), nullptr); break;
-      case io::Tunable::Kind::real: g_object_set(detect, t.name, value, nullptr); break;
-      case io::Tunable::Kind::boolean: g_object_set(detect, t.name, gboolean(value != 0), nullptr); break;
-    }
-  }
+  lftag::gst::set_tunable_properties(G_OBJECT(detect), o_.params);
   if (o_.tracking)
     g_object_set(detect, "tracking", TRUE, "lost-after", o_.lost_after, "smoothing", gboolean(o_.smoothing),
                  "full-detection-interval", guint(o_.full_detection_interval), nullptr);
