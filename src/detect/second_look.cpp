@@ -23,6 +23,60 @@
 namespace lftag::detail {
 namespace {
 
+// ------------------------------------------------------------------------------ limits
+// Every bound that decides whether a cluster of the frame is looked at again, in one
+// place. They spend the second look's time and can lose a marker, but they cannot add a
+// wrong id: what a second look finds passes the checks the frame's own candidates pass.
+// "Markers found" below: the boxes whose second look found a marker in the range, blur
+// and video sweeps and the field experiment's tuning set, 3x3 and 4x4 (docs/detector.md,
+// Limits, has the validation set's figures beside them).
+
+// A marker's box: longer side over shorter, a square seen at up to about 70 degrees
+// (markers found: 2.0 or less).
+constexpr double kMaxBoxAspect = 3;
+// Ink over the box, about half: markers found 0.351 to 0.713 (0.42 to 0.68 measured
+// from 13 px to blurred 70 px markers when it was chosen).
+constexpr double kMinClusterFill = 0.35, kMaxClusterFill = 0.8;
+// Black regions and their holes in a cluster: one piece or a ring is a blob or a letter
+// (markers found: 4 or more); a small marker's broken border with the pieces in its box
+// needs one more, its box being the border's own.
+constexpr int kMinClusterPieces = 4, kMinBorderPieces = 5;
+// Black pixels on the ring just outside the box (or around a border's grown hull) over
+// the ring's length: a marker alone on its white margin (markers found: 0.20 or less).
+constexpr double kMaxRingInk = 0.25;
+// A closed border's largest hole with what it holds, over the border's box: markers found
+// 0.200 to 0.693 (a solid blob fills nothing, a frame around a plain hole most).
+constexpr double kMinHoleFill = 0.2, kMaxHoleFill = 0.8;
+// A closed border holds this many squares (of 2 px or more) in its hole at least, unless
+// smeared (a round bound; markers found held 2 to 27).
+constexpr int kMinHeldSquares = 2;
+// A border whose squares a motion blur smeared into it: its hole spans this share of the
+// border's box each way at least (markers found 0.515 or more) and fills at most this
+// share of its own box.
+constexpr double kMinSmearedHoleSpan = 0.6, kMaxSmearedHoleFill = 0.6;
+// ... and lines the border on this share of its rows or columns (see lines_opposite_sides).
+constexpr double kMinLinedShare = 0.8;
+// Ink on the grown hull of a region whose cluster outgrew a marker, at most: its own margin.
+constexpr double kCleanMargin = 0.02;
+// Resolved markers of other families (see unsought_marker): squares of at least this many
+// pixels; largest over smallest at most 3 for a family larger than every one sought (a
+// steep perspective), kMaxSmallerMarkerSpread for a smaller one.
+constexpr int kMinSquarePixels = 16;
+constexpr double kMaxLargerMarkerSpread = 3;
+// The resolved LFTag markers of the speed scenes, 2x2 to 8x8: largest squares (the
+// baselines, 16/9 of the others) 1.64 to 2.11 times their smallest.
+constexpr double kMaxSmallerMarkerSpread = 2.3;
+// A cluster whose binary image fits its grey levels this well is resolved (see
+// near_candidates). Measured on the AprilTag, ArUco and LFTag 2x2 markers of the speed
+// scenes: 0.23 to 0.51 mid-grey pixels per edge, features 12 px wide or more. On every
+// marker of 64 px or more that a second look found in the range, angle, blur, pose and
+// video sweeps: 0.83 or more, but for sharp 5x5 to 8x8 markers tilted 60 to 70 degrees
+// (0.37 to 0.47), whose features along the tilt are a pixel or two wide (5.1 px or less
+// on average) and which the frame's 16 px mean threshold did not resolve.
+constexpr double kResolvedMidGreyPerEdge = 0.6;
+constexpr double kResolvedFeatureWidth = 8;  // px
+// ------------------------------------------------------------------------------
+
 struct Cluster {
   int x0, y0, x1, y1;  // inclusive box
   int ink = 0;         // black pixels of its regions
@@ -112,7 +166,7 @@ bool lines_opposite_sides(const RegionTree& tree, int hole) {
   int rows = 0, cols = 0;
   for (int y = 0; y < h; ++y) rows += row_lo[y] <= g.x0 + tol && row_hi[y] >= g.x1 - tol;
   for (int x = 0; x < w; ++x) cols += col_lo[x] <= g.y0 + tol && col_hi[x] >= g.y1 - tol;
-  return rows >= 0.8 * h || cols >= 0.8 * w;
+  return rows >= kMinLinedShare * h || cols >= kMinLinedShare * w;
 }
 
 // The largest hole of black region r.
@@ -137,15 +191,8 @@ int largest_hole(const RegionTree& tree, int r) {
 // Small markers are another matter: in the range sweep a 3x3 marker of 31 px (1.3 px per
 // unit) showed 16 pieces of 2 to 15 pixels in its hole, its squares broken by the mean
 // threshold; and a large square hollowed by it breaks into pieces of unequal sizes. The
-// other families' markers of the speed scenes (70 px and more) have squares of 16 pixels
-// or more (a bound of 25 lets some of them through again).
-constexpr int kMinSquarePixels = 16;
-// The resolved LFTag markers of the speed scenes, 2x2 to 8x8: largest squares (the
-// baselines, 16/9 of the others) 1.64 to 2.11 times their smallest.
-constexpr double kMaxSmallerMarkerSpread = 2.3;
-
-// Ink on the grown hull of a region whose cluster outgrew a marker, at most: its own margin.
-constexpr double kCleanMargin = 0.02;
+// other families' markers of the speed scenes (70 px and more) have squares of
+// kMinSquarePixels or more (a bound of 25 lets some of them through again).
 
 // `max_n`: the largest n of the families `sought`.
 int unsought_marker(const RegionTree& tree, int r, const std::bitset<Family::kMaxN + 1>& sought, int max_n) {
@@ -159,7 +206,7 @@ int unsought_marker(const RegionTree& tree, int r, const std::bitset<Family::kMa
     const int area = tree.regions[tree.children_of(hole)[i]].area;
     smallest = std::min(smallest, area), largest = std::max(largest, area);
   }
-  const double spread = n > max_n ? 3 : kMaxSmallerMarkerSpread;
+  const double spread = n > max_n ? kMaxLargerMarkerSpread : kMaxSmallerMarkerSpread;
   return smallest >= kMinSquarePixels && largest <= spread * smallest ? n : 0;
 }
 
@@ -224,16 +271,6 @@ BinaryFit binary_fit(const BinaryImage& binary, const ImageView& grey, std::vect
   }
   return {double(mid) / std::max(1, edges), 2.0 * pixels / std::max(1, edges)};
 }
-
-// A cluster whose binary image fits its grey levels this well is resolved (see
-// near_candidates). Measured on the AprilTag, ArUco and LFTag 2x2 markers of the speed
-// scenes: 0.23 to 0.51 mid-grey pixels per edge, features 12 px wide or more. On every
-// marker of 64 px or more that a second look found in the range, angle, blur, pose and
-// video sweeps: 0.83 or more, but for sharp 5x5 to 8x8 markers tilted 60 to 70 degrees
-// (0.37 to 0.47), whose features along the tilt are a pixel or two wide (5.1 px or less
-// on average) and which the frame's 16 px mean threshold did not resolve.
-constexpr double kResolvedMidGreyPerEdge = 0.6;
-constexpr double kResolvedFeatureWidth = 8;  // px
 
 }  // namespace
 
@@ -313,13 +350,14 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
   std::vector<std::pair<double, cv::Rect>> found;  // ring ink, box
   // A marker's size, a square seen at up to about 70 degrees.
   const auto marker_sized = [&](int w, int h) {
-    return std::max(w, h) >= look.min_size && std::max(w, h) <= look.max_size && std::max(w, h) <= 3 * std::min(w, h);
+    return std::max(w, h) >= look.min_size && std::max(w, h) <= look.max_size &&
+           std::max(w, h) <= kMaxBoxAspect * std::min(w, h);
   };
   // About half ink (0.42 to 0.68 measured from 13 px to blurred 70 px markers) and broken
   // into pieces or holed by its gaps: one piece or a ring is a blob or a letter.
   const auto marker_like = [](int ink, int pieces, int w, int h, int min_pieces) {
     const double fill = double(ink) / (w * h);
-    return fill >= 0.35 && fill <= 0.8 && pieces >= min_pieces;
+    return fill >= kMinClusterFill && fill <= kMaxClusterFill && pieces >= min_pieces;
   };
   // A cluster of 64 px or more is looked at again in the frame's own pixels: when its
   // binary image already explains its grey levels and its features are several pixels
@@ -343,9 +381,9 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     // had 5 or more), and alone
     // on its white margin. Of the clusters in photos, about 2 in 1,000 pass.
     if (!marker_sized(w, h)) continue;
-    if (!marker_like(c.ink, c.pieces, w, h, 4) || c.larger_marker) continue;
+    if (!marker_like(c.ink, c.pieces, w, h, kMinClusterPieces) || c.larger_marker) continue;
     const double ring = ring_ink(binary, c);
-    if (ring > 0.25) continue;
+    if (ring > kMaxRingInk) continue;
     const cv::Rect box(c.x0, c.y0, w, h);
     const auto hull = [&] { return region_hull(tree, members_of(int(i))); };
     if (!overlaps_any(box, taken) && !resolved(box, hull, c.smaller_marker)) found.emplace_back(ring, box);
@@ -371,24 +409,25 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
       squares += k.area >= 2;
     }
     const double hole_fill = double(inside) / (w * h);
-    if (hole_fill < 0.2 || hole_fill > 0.8) continue;
+    if (hole_fill < kMinHoleFill || hole_fill > kMaxHoleFill) continue;
     // The hole holds two squares or more; or, under a long motion blur that smeared
     // every column of squares into the border, nothing: then the hole is the gaps,
     // spanning most of the border's box but filling little of its own (a frame around a
     // plain hole fills it), and the white ring's two sides along the blur still line
     // the border.
     const int hw = white.x1 - white.x0 + 1, hh = white.y1 - white.y0 + 1;
-    const bool smeared = squares == 0 && white.child_count == 0 && hw >= 0.6 * w && hh >= 0.6 * h &&
-                         white.area <= 0.6 * hw * hh && lines_opposite_sides(tree, hole);
-    if (squares < 2 && !smeared) continue;
+    const bool smeared = squares == 0 && white.child_count == 0 && hw >= kMinSmearedHoleSpan * w &&
+                         hh >= kMinSmearedHoleSpan * h && white.area <= kMaxSmearedHoleFill * hw * hh &&
+                         lines_opposite_sides(tree, hole);
+    if (squares < kMinHeldSquares && !smeared) continue;
     const cv::Rect box(g.x0, g.y0, w, h);
     if (overlaps_any(box, taken) ||
         std::any_of(found.begin(), found.end(), [&](const auto& f) { return (f.second & box).area() > 0; }))
       continue;
     const std::vector<cv::Point> hull = region_hull(tree, {r});
     const double ring = hull_ring_ink(binary, g, hull);
-    if (ring <= 0.25 && !resolved(
-                            box, [&] { return hull; }, unsought != 0))
+    if (ring <= kMaxRingInk && !resolved(
+                                   box, [&] { return hull; }, unsought != 0))
       found.emplace_back(ring, box);
   }
   // A small marker whose border the threshold broke open (defocus and a steep tilt at
@@ -414,7 +453,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     auto k = std::lower_bound(small.begin(), small.end(), seed.y0, [](const Cluster& c, int y) { return c.y0 < y; });
     for (; k != small.end() && k->y0 <= seed.y1; ++k)
       if (k->x0 >= seed.x0 && k->x1 <= seed.x1 && k->y1 <= seed.y1) ink += k->ink, pieces += k->pieces;
-    if (!marker_like(ink, pieces, w, h, 5)) continue;
+    if (!marker_like(ink, pieces, w, h, kMinBorderPieces)) continue;
     const double ring = hull_ring_ink(binary, tree.regions[seed.region], region_hull(tree, {seed.region}));
     if (ring <= kCleanMargin) found.emplace_back(ring, box);
   }

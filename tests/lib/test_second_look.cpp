@@ -314,6 +314,80 @@ TEST(NearCandidates, SharpClustersOfAMarkersSizeAreNotLookedAtAgain) {
   EXPECT_TRUE(clusters_of(coarse, {}, {}, grey_of(coarse, 0)).empty());
 }
 
+TEST(NearCandidates, EachBoundRefusesAClusterJustOutsideIt) {
+  // The bounds at the top of second_look.cpp, each with a cluster just inside it (looked
+  // at) and one just outside (not), all else alike.
+  // Ink over the box, 0.35 to 0.8: a black 21 x 21 square with four holes (5 pieces).
+  const auto holed = [](const std::vector<cv::Rect>& holes) {
+    cv::Mat1b black(100, 100, std::uint8_t(0));
+    black(cv::Rect(40, 40, 21, 21)).setTo(255);
+    for (const cv::Rect& h : holes) black(h + cv::Point(40, 40)).setTo(0);
+    return black;
+  };
+  const auto four_holes = [](cv::Size a, cv::Size b, cv::Size c, cv::Size d) {
+    return std::vector<cv::Rect>{{{1, 1}, a}, {{11, 1}, b}, {{1, 11}, c}, {{11, 11}, d}};
+  };
+  const cv::Size big(8, 9), smaller(7, 9), small(5, 5), tiny(4, 5);
+  EXPECT_EQ(clusters_of(holed(four_holes(big, big, big, smaller))).size(), 1u);      // 162 / 441 = 0.367
+  EXPECT_TRUE(clusters_of(holed(four_holes(big, big, big, big))).empty());           // 153 / 441 = 0.347
+  EXPECT_EQ(clusters_of(holed(four_holes(small, small, small, small))).size(), 1u);  // 341 / 441 = 0.773
+  EXPECT_TRUE(clusters_of(holed(four_holes(tiny, tiny, tiny, tiny))).empty());       // 361 / 441 = 0.819
+  // Four pieces at least: the square with three holes (4 pieces, ink 0.51) and with two
+  // (3 pieces, ink 0.50).
+  EXPECT_EQ(clusters_of(holed({{{1, 1}, big}, {{11, 1}, big}, {{1, 11}, big}})).size(), 1u);
+  EXPECT_TRUE(clusters_of(holed({{{1, 1}, cv::Size(19, 5)}, {{1, 12}, cv::Size(19, 6)}})).empty());
+
+  // Longer side over shorter, 3 at most: checkerboards of 2 px pieces 30 x 10 and 32 x 10.
+  const auto board = [](int w, int h) {
+    cv::Mat1b black(100, 100, std::uint8_t(0));
+    for (int y = 0; y < h; y += 2)
+      for (int x = 0; x < w; x += 2)
+        if ((x + y) % 4 == 0) black(cv::Rect(30 + x, 40 + y, 2, 2)).setTo(255);
+    return black;
+  };
+  EXPECT_EQ(clusters_of(board(30, 10)).size(), 1u);
+  EXPECT_TRUE(clusters_of(board(32, 10)).empty());
+
+  // Ink on the ring just outside the box, a quarter at most: the 20 x 20 cluster of
+  // draw_pieces (ring of 84 px) under and over combs of a larger region, whose teeth
+  // reach the ring only beside its white pixels (so as not to join the cluster): 21
+  // teeth are 0.25, 22 are 0.26.
+  const auto combed = [](int teeth) {
+    cv::Mat1b black(120, 400, std::uint8_t(0));
+    const int x0 = 260, y0 = 40, x1 = 279, y1 = 59;
+    draw_pieces(black, x0, y0);
+    black.row(y0 - 2).colRange(0, x1 + 2).setTo(255);  // longer than any cluster looked at
+    black.row(y1 + 2).colRange(0, x1 + 2).setTo(255);
+    std::vector<cv::Point> free;  // ring pixels whose inner neighbour is white
+    for (int x = x0 - 1; x <= x1 + 1; ++x) {
+      if (x < x0 || x > x1 || !black(y0, x)) free.emplace_back(x, y0 - 1);
+      if (x < x0 || x > x1 || !black(y1, x)) free.emplace_back(x, y1 + 1);
+    }
+    EXPECT_EQ(free.size(), 24u);
+    for (int k = 0; k < teeth; ++k) black(free[std::size_t(k)]) = 255;
+    return black;
+  };
+  EXPECT_EQ(clusters_of(combed(21)).size(), 1u);
+  EXPECT_TRUE(clusters_of(combed(22)).empty());
+
+  // A closed border around a hole: the hole with what it holds 0.2 to 0.8 of the box,
+  // and two squares in it at least. A 40 px frame holding two 4 px squares, its ink
+  // outside the cluster bounds at every thickness here: 3 px (0.72) and 11 px (0.20) are
+  // looked at, 2 px (0.81) and 12 px (0.16) are not; nor is one holding a single square.
+  const auto frame = [](int thickness, int squares) {
+    cv::Mat1b black(100, 100, std::uint8_t(0));
+    black(cv::Rect(30, 30, 40, 40)).setTo(255);
+    black(cv::Rect(30 + thickness, 30 + thickness, 40 - 2 * thickness, 40 - 2 * thickness)).setTo(0);
+    for (int k = 0; k < squares; ++k) black(cv::Rect(44 + 8 * k, 48, 4, 4)).setTo(255);
+    return black;
+  };
+  EXPECT_EQ(clusters_of(frame(3, 2)).size(), 1u);
+  EXPECT_TRUE(clusters_of(frame(2, 2)).empty());
+  EXPECT_EQ(clusters_of(frame(11, 2)).size(), 1u);
+  EXPECT_TRUE(clusters_of(frame(12, 2)).empty());
+  EXPECT_TRUE(clusters_of(frame(3, 1)).empty());
+}
+
 TEST(SecondLookPatch, ReopensOnePixelGapsBesideABrightMargin) {
   // A 3x3 marker at 0.55 pixels per unit (13 px across) with a quarter-tag white margin on
   // mid-grey, turned 30 degrees: the frame's 16 px mean threshold joins squares to the
