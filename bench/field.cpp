@@ -732,6 +732,7 @@ std::vector<std::vector<cv::Mat1b>> render_clip(const Clip& c, const std::vector
 struct Truth {
   int subset = kVisible;
   double edge = 0, tilt = 0, distance = 0, blur = kNaN, bend = kNaN, occluded = kNaN;
+  cv::Point2d center;  // image of the tag's centre, pixels
 };
 struct Seen {
   bool found = false;
@@ -788,6 +789,7 @@ std::vector<Truth> truth_of(const Clip& c, int f) {
     const Extra& e = c.extras[m];
     Truth t;
     t.edge = edge_px(c.camera, p, kTagSize);
+    t.center = center_of(c.camera, p);
     t.tilt = tilt_deg(p);
     t.distance = cv::norm(p.tvec);
     if (e.bend != 0) t.bend = e.bend;
@@ -1074,6 +1076,8 @@ bool run_field(const Options& options) {
                                               "marker",
                                               "id",
                                               "subset",
+                                              "x",
+                                              "y",
                                               "edge_px",
                                               "tilt_deg",
                                               "distance_m",
@@ -1136,8 +1140,8 @@ bool run_field(const Options& options) {
           const Seen& o = seen[ci][f][s][m];
           const double relative = 100 * o.translation_m / t.distance;
           markers_csv.row(name, families[s], kSets[c.set], kInfo[c.condition].name, c.index, f, int(m), fid[m],
-                          kSubsetNames[t.subset], t.edge, t.tilt, t.distance, t.blur, t.bend, t.occluded, int(o.found),
-                          o.wrong, o.translation_m, relative, o.rotation_deg);
+                          kSubsetNames[t.subset], t.center.x, t.center.y, t.edge, t.tilt, t.distance, t.blur, t.bend,
+                          t.occluded, int(o.found), o.wrong, o.translation_m, relative, o.rotation_deg);
           for (int cond : {c.condition, int(kConditions)}) {
             if (cond == kConditions && t.subset != kVisible) continue;  // "all": visible markers only
             Tally& k = tally[c.set][cond][t.subset];
