@@ -1014,12 +1014,13 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
   if (stats.past_deadline > 0 && !st.warned_deadline) {
     GST_ELEMENT_WARNING(
         self, STREAM, FAILED,
-        ("The frame at %" GST_TIME_FORMAT " took longer than its deadline (deadline=%g ms): %" G_GINT64_FORMAT
-         " second looks, candidates in them and outline reads were skipped (the frame's own candidates "
-         "were all examined). Far or blurred markers may be missed in such frames; this is reported "
-         "once per stream.",
-         GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), s.detector.deadline_ms, stats.skipped_by_deadline),
-        (nullptr));
+        ("The frame at %" GST_TIME_FORMAT " took longer than its deadline (deadline=%g ms): the search "
+         "beyond the frame's own candidates (which were all examined) was cut short. Far or blurred "
+         "markers may be missed in such frames; raise deadline, or set it to 0 for none. This is "
+         "reported once per stream.",
+         GST_TIME_ARGS(GST_BUFFER_PTS(buffer)), s.detector.deadline_ms),
+        ("%" G_GINT64_FORMAT " second looks, border proposals, candidates in them and outline reads skipped",
+         stats.skipped_by_deadline));
     st.warned_deadline = true;
   }
 

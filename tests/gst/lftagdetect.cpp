@@ -1243,7 +1243,8 @@ GST_END_TEST;
 GST_START_TEST(test_calibration_change_while_playing) {
   const std::string file = std::string(LFTAG_TEST_DATA) + "/opencv_sample.yml";
   GstElement* pipeline = gst_parse_launch(
-      ("lftagtestsrc is-live=true ! lftagdetect name=d calibration-file=" + file + " ! fakesink").c_str(), nullptr);
+      ("lftagtestsrc is-live=true ! lftagdetect name=d deadline=0 calibration-file=" + file + " ! fakesink").c_str(),
+      nullptr);
   GstElement* d = gst_bin_get_by_name(GST_BIN(pipeline), "d");
   fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
   fail_unless(gst_element_get_state(pipeline, nullptr, nullptr, 30 * GST_SECOND) == GST_STATE_CHANGE_SUCCESS);
@@ -1319,8 +1320,8 @@ GST_END_TEST;
 GST_START_TEST(test_uncalibrated_warning) {
   const std::string file = std::string(LFTAG_TEST_DATA) + "/opencv_sample.yml";
   auto warnings = [](const std::string& properties) {
-    std::vector<GstMessage*> messages =
-        run_to_eos("lftagtestsrc num-buffers=15 ! lftagdetect " + properties + " ! fakesink", GST_MESSAGE_WARNING);
+    std::vector<GstMessage*> messages = run_to_eos(
+        "lftagtestsrc num-buffers=15 ! lftagdetect deadline=0 " + properties + " ! fakesink", GST_MESSAGE_WARNING);
     for (GstMessage* m : messages) {
       GError* error = nullptr;
       gst_message_parse_warning(m, &error, nullptr);
@@ -1390,8 +1391,8 @@ GST_START_TEST(test_camera_not_set) {
   }
 
   auto warnings = [](const std::string& properties) {
-    std::vector<GstMessage*> messages =
-        run_to_eos("lftagtestsrc num-buffers=3 ! lftagdetect " + properties + " ! fakesink", GST_MESSAGE_WARNING);
+    std::vector<GstMessage*> messages = run_to_eos(
+        "lftagtestsrc num-buffers=3 ! lftagdetect deadline=0 " + properties + " ! fakesink", GST_MESSAGE_WARNING);
     std::string text;
     for (GstMessage* m : messages) {
       GError* error = nullptr;
@@ -1569,7 +1570,7 @@ GST_START_TEST(test_video_meta_larger_than_buffer) {
     Frames frames;
     pull_frames(frames, "lftagtestsrc num-buffers=1 count=1",
                 (std::string("video/x-raw,width=640,height=480,format=") + format).c_str(), 1);
-    GstHarness* h = detector("overlay=outline+id", frames.info);
+    GstHarness* h = detector("deadline=0 overlay=outline+id", frames.info);
     GstBus* bus = gst_bus_new();
     gst_element_set_bus(h->element, bus);
     const GstVideoInfo& info = frames.info;
@@ -1770,7 +1771,8 @@ GST_START_TEST(test_bad_families) {
 
   // A good value after a bad one clears it.
   GstElement* pipeline = gst_parse_launch(
-      "lftagtestsrc is-live=true num-buffers=30 ids=6789 ! lftagdetect name=d families=9x9 ! fakesink", nullptr);
+      "lftagtestsrc is-live=true num-buffers=30 ids=6789 ! lftagdetect name=d deadline=0 families=9x9 ! fakesink",
+      nullptr);
   GstElement* d = gst_bin_get_by_name(GST_BIN(pipeline), "d");
   g_object_set(d, "families", "3x3", nullptr);
   GstBus* bus = gst_element_get_bus(pipeline);

@@ -6,6 +6,8 @@
 // says which frame is lost; a file deleted, moved or replaced while written is an error;
 // at EOS, when stopped mid-stream and after an error downstream every frame received is
 // in the file, whole, and the file is closed.
+// lftagdetect runs with deadline=0: its deadline's warning, which a loaded or sanitized
+// machine can post, is not the subject here and would spoil the warning counts.
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -222,9 +224,9 @@ GST_START_TEST(test_file_matches_metas) {
   const ScratchDir scratch;
   const std::string path = scratch.path("d.jsonl");
   Run run;
-  run_pipeline(
-      "lftagtestsrc num-buffers=12 ids=6789,42 ! lftagdetect ! lftagpublish location=" + path + " ! fakesink name=sink",
-      run);
+  run_pipeline("lftagtestsrc num-buffers=12 ids=6789,42 ! lftagdetect deadline=0 ! lftagpublish location=" + path +
+                   " ! fakesink name=sink",
+               run);
   const std::vector<nlohmann::json> lines = read_lines(path);
   expect_lines_match(lines, run);
   // Both markers in every frame, as `lftag detect` writes them.
@@ -244,7 +246,7 @@ GST_END_TEST;
 GST_START_TEST(test_append) {
   const ScratchDir scratch;
   const std::string path = scratch.path("a.jsonl");
-  const std::string launch = "lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish location=" + path;
+  const std::string launch = "lftagtestsrc num-buffers=3 ! lftagdetect deadline=0 ! lftagpublish location=" + path;
   Run first, second, third;
   run_pipeline(launch + " ! fakesink name=sink", first);
   run_pipeline(launch + " append=true ! fakesink name=sink", second);
@@ -264,7 +266,7 @@ GST_START_TEST(test_stdout) {
     FILE* capture = fopen(path.c_str(), "w");
     dup2(fileno(capture), STDOUT_FILENO);
     Run run;
-    run_pipeline(std::string("lftagtestsrc num-buffers=4 ids=77 ! lftagdetect ! lftagpublish") + location +
+    run_pipeline(std::string("lftagtestsrc num-buffers=4 ids=77 ! lftagdetect deadline=0 ! lftagpublish") + location +
                      " ! fakesink name=sink",
                  run);
     fflush(stdout);
@@ -279,7 +281,8 @@ GST_END_TEST;
 // A location that cannot be written fails the state change with an error naming it.
 GST_START_TEST(test_unwritable_location) {
   const Posted error = start_error(
-      "lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p location=/nonexistent-dir/d.jsonl ! fakesink");
+      "lftagtestsrc num-buffers=3 ! lftagdetect deadline=0 ! lftagpublish name=p location=/nonexistent-dir/d.jsonl ! "
+      "fakesink");
   fail_unless_equals_string(error.source.c_str(), "p");
   fail_unless(error.domain == GST_RESOURCE_ERROR && error.code == GST_RESOURCE_ERROR_OPEN_WRITE, "%s",
               error.message.c_str());
@@ -294,7 +297,7 @@ GST_START_TEST(test_after_encode_and_decode) {
   const std::string path = scratch.path("coded.jsonl");
   Run run;
   run_pipeline(
-      "lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect ! videoconvert ! vp8enc deadline=1 ! "
+      "lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect deadline=0 ! videoconvert ! vp8enc deadline=1 ! "
       "lftagpublish location=" +
           path + ".encoded ! vp8dec ! lftagpublish location=" + path + " ! fakesink name=sink",
       run);
@@ -307,7 +310,7 @@ GST_START_TEST(test_after_encode_and_decode) {
   Run written, read;
   const std::string video = path + ".webm";
   run_pipeline(
-      "lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect ! videoconvert ! vp8enc deadline=1 ! webmmux ! "
+      "lftagtestsrc num-buffers=8 ids=6789 ! lftagdetect deadline=0 ! videoconvert ! vp8enc deadline=1 ! webmmux ! "
       "filesink name=sink location=" +
           video,
       written);
@@ -333,7 +336,7 @@ GST_START_TEST(test_after_crop_and_scale) {
   const std::string path = scratch.path("crop.jsonl");
   for (const char* element : {"videocrop left=10 top=6", "videobox left=8"}) {
     Run run;
-    run_pipeline(std::string("lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect ! ") + element +
+    run_pipeline(std::string("lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect deadline=0 ! ") + element +
                      " ! lftagpublish location=" + path + " ! fakesink name=sink",
                  run);
     fail_unless_equals_int(run.buffers.size(), 3);
@@ -347,7 +350,7 @@ GST_START_TEST(test_after_crop_and_scale) {
   }
   Run run;
   run_pipeline(
-      "lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect ! videoscale ! video/x-raw,width=320,height=240 ! "
+      "lftagtestsrc num-buffers=3 ids=6789 ! lftagdetect deadline=0 ! videoscale ! video/x-raw,width=320,height=240 ! "
       "lftagpublish location=" +
           path + " ! fakesink name=sink",
       run);
@@ -362,7 +365,8 @@ GST_START_TEST(test_times_after_seek) {
   const ScratchDir scratch;
   const std::string path = scratch.path("seek.jsonl");
   GstElement* pipeline = gst_parse_launch(
-      ("lftagtestsrc count=1 ! lftagdetect ! lftagpublish location=" + path + " ! fakesink").c_str(), nullptr);
+      ("lftagtestsrc count=1 ! lftagdetect deadline=0 ! lftagpublish location=" + path + " ! fakesink").c_str(),
+      nullptr);
   fail_unless(gst_element_set_state(pipeline, GST_STATE_PAUSED) == GST_STATE_CHANGE_ASYNC);
   fail_unless(gst_element_get_state(pipeline, nullptr, nullptr, GST_CLOCK_TIME_NONE) == GST_STATE_CHANGE_SUCCESS);
   fail_unless(gst_element_seek_simple(pipeline, GST_FORMAT_TIME,
@@ -390,7 +394,8 @@ GST_START_TEST(test_write_error_leaves_whole_lines) {
   const ScratchDir scratch;
   const std::string reference = scratch.path("reference.jsonl");
   const std::string path = scratch.path("limited.jsonl");
-  const std::string launch = "lftagtestsrc num-buffers=8 ids=6789,42 ! lftagdetect ! lftagpublish name=p location=";
+  const std::string launch =
+      "lftagtestsrc num-buffers=8 ids=6789,42 ! lftagdetect deadline=0 ! lftagpublish name=p location=";
   Run run;
   run_pipeline(launch + reference + " ! fakesink name=sink", run);
   const std::vector<std::string> lines = raw_lines(reference);
@@ -438,7 +443,8 @@ GST_END_TEST;
 // No space left: the error says so, with its own code, and which frame is lost.
 GST_START_TEST(test_no_space_left) {
   GstElement* pipeline = gst_parse_launch(
-      "lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p location=/dev/full ! fakesink", nullptr);
+      "lftagtestsrc num-buffers=3 ! lftagdetect deadline=0 ! lftagpublish name=p location=/dev/full ! fakesink",
+      nullptr);
   GstBus* bus = gst_element_get_bus(pipeline);
   fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
   const Posted error = parse_error(
@@ -692,7 +698,8 @@ GST_START_TEST(test_every_frame_at_eos) {
   const ScratchDir scratch;
   const std::string path = scratch.path("eos.jsonl");
   GstElement* pipeline = gst_parse_launch(
-      ("lftagtestsrc num-buffers=25 ids=6789 ! lftagdetect ! lftagpublish name=p location=" + path + " ! fakesink")
+      ("lftagtestsrc num-buffers=25 ids=6789 ! lftagdetect deadline=0 ! lftagpublish name=p location=" + path +
+       " ! fakesink")
           .c_str(),
       nullptr);
   Received received;
@@ -720,11 +727,12 @@ GST_START_TEST(test_every_frame_when_stopped_mid_stream) {
   for (const GstState target : {GST_STATE_NULL, GST_STATE_READY}) {
     const ScratchDir scratch;
     const std::string path = scratch.path("stopped.jsonl");
-    GstElement* pipeline = gst_parse_launch(("lftagtestsrc is-live=true ids=6789 ! lftagdetect ! lftagpublish "
-                                             "name=p location=" +
-                                             path + " ! fakesink sync=true")
-                                                .c_str(),
-                                            nullptr);
+    GstElement* pipeline =
+        gst_parse_launch(("lftagtestsrc is-live=true ids=6789 ! lftagdetect deadline=0 ! lftagpublish "
+                          "name=p location=" +
+                          path + " ! fakesink sync=true")
+                             .c_str(),
+                         nullptr);
     Received received;
     watch_publisher(pipeline, received);
     fail_unless(gst_element_set_state(pipeline, GST_STATE_PLAYING) != GST_STATE_CHANGE_FAILURE);
@@ -745,7 +753,8 @@ GST_START_TEST(test_every_frame_after_an_error_downstream) {
   const ScratchDir scratch;
   const std::string path = scratch.path("error.jsonl");
   GstElement* pipeline = gst_parse_launch(
-      ("lftagtestsrc ids=6789 ! lftagdetect ! lftagpublish name=p location=" + path + " ! fakesink").c_str(), nullptr);
+      ("lftagtestsrc ids=6789 ! lftagdetect deadline=0 ! lftagpublish name=p location=" + path + " ! fakesink").c_str(),
+      nullptr);
   Received received;
   received.error_at = 7;
   watch_publisher(pipeline, received);
@@ -803,7 +812,7 @@ GST_END_TEST;
 // A build without libmosquitto: target=mqtt fails the start, saying what to install.
 GST_START_TEST(test_mqtt_needs_libmosquitto) {
   const Posted error =
-      start_error("lftagtestsrc num-buffers=3 ! lftagdetect ! lftagpublish name=p target=mqtt ! fakesink");
+      start_error("lftagtestsrc num-buffers=3 ! lftagdetect deadline=0 ! lftagpublish name=p target=mqtt ! fakesink");
   fail_unless_equals_string(error.source.c_str(), "p");
   fail_unless(
       has(error.message, "without MQTT") && has(error.message, "libmosquitto-dev") && has(error.message, "target=file"),
