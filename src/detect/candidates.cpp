@@ -5,28 +5,43 @@
 #include <numeric>
 
 #include <Eigen/Dense>
+#include <opencv2/imgproc.hpp>
 
 #include "stages.hpp"
 
 namespace lftag::detail {
 namespace {
 
+// The grey levels of `image` (whose pixel (0, 0) lies at `origin` in the tree's image)
+// over the pixels of `region` within it.
+struct LevelHistogram {
+  int count[256] = {};
+  int total = 0;
+  LevelHistogram(const RegionTree& tree, int region, const cv::Mat1b& image, cv::Point origin = {}) {
+    const int x_end = origin.x + image.cols;
+    tree.for_each_run(region, [&](int y, int x0, int x1) {
+      if (y < origin.y || y >= origin.y + image.rows) return;
+      const std::uint8_t* row = image.ptr<std::uint8_t>(y - origin.y) - origin.x;
+      x0 = std::max(x0, origin.x), x1 = std::min(x1, x_end);
+      for (int x = x0; x < x1; ++x) ++count[row[x]];
+      total += std::max(0, x1 - x0);
+    });
+  }
+  // The least level that at least a share q of the pixels do not exceed (255 for none).
+  int quantile(double q) const {
+    int seen = 0;
+    for (int level = 0; level < 256; ++level)
+      if ((seen += count[level]) >= q * total && seen > 0) return level;
+    return 255;
+  }
+};
+
 // The white region's paper level: the upper quartile of its grey levels. Its mean would
 // sink below the paper's white on a small marker, where most of the region's pixels are
 // mixed with the squares around them, and bias every centroid towards the pixel grid
 // (0.11 px at 0.67 px per unit, enough to misread an axis-aligned marker).
 double white_level(const RegionTree& tree, int region, const ImageView& image) {
-  int histogram[256] = {};
-  int count = 0;
-  tree.for_each_run(region, [&](int y, int x0, int x1) {
-    const std::uint8_t* row = image.data + y * image.stride;
-    for (int x = x0; x < x1; ++x) ++histogram[row[x]];
-    count += x1 - x0;
-  });
-  int seen = 0;
-  for (int level = 0; level < 256; ++level)
-    if ((seen += histogram[level]) >= 0.75 * count) return level;
-  return 255;
+  return LevelHistogram(tree, region, image.mat()).quantile(0.75);
 }
 
 // The blobs' ink, largest over smallest, with the perspective taken out. A homography
@@ -67,7 +82,7 @@ double perspective_free_ink_ratio(std::vector<Blob>& blobs) {
 }  // namespace
 
 Blob BlobMeasurer::measure(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary,
-                           int reach, double white) {
+                           int reach, const PaperLevel& paper) {
   // The blob's window: its box grown by `reach`. In it, each pixel is the blob's own,
   // another black region's, or white; a white pixel counts for the blob when the nearest
   // black pixel within `reach` is the blob's (ties count half). So the anti-aliased edge
@@ -140,7 +155,7 @@ Blob BlobMeasurer::measure(const RegionTree& tree, int region, const ImageView& 
         share = own > limit ? 0.0 : own < other ? 1.0 : own == other ? 0.5 : 0.0;
       }
       if (share == 0) continue;
-      const double wgt = share * std::max(0.0, white - row[x]);
+      const double wgt = share * paper.ink(x, y, row[x]);
       m += wgt, mx += wgt * x, my += wgt * y;
     }
   }
@@ -151,6 +166,45 @@ Blob BlobMeasurer::measure(const RegionTree& tree, int region, const ImageView& 
   b.mass = m;
   b.centroid = m > 0 ? cv::Point2d(mx / m, my / m) : cv::Point2d((r.x0 + r.x1) / 2.0, (r.y0 + r.y1) / 2.0);
   return b;
+}
+
+PaperLevel paper_under(const RegionTree& tree, int white_region, const int* kids, int count, const ImageView& image,
+                       int reach) {
+  PaperLevel paper(white_level(tree, white_region, image));
+  std::vector<int> areas;
+  cv::Rect box;
+  int largest = 0;
+  for (int i = 0; i < count; ++i) {
+    const Region& r = tree.regions[kids[i]];
+    areas.push_back(r.area);
+    const cv::Rect b(r.x0, r.y0, r.x1 - r.x0 + 1, r.y1 - r.y0 + 1);
+    box = i == 0 ? b : box | b;
+    largest = std::max({largest, b.width, b.height});
+  }
+  if (areas.empty()) return paper;
+  std::nth_element(areas.begin(), areas.begin() + count / 2, areas.end());
+  if (areas[std::size_t(count / 2)] < kMinLocalPaperArea) return paper;
+  // Closed by a square one pixel wider each way than the largest square's box.
+  const int k = largest + 2;
+  const int grow = reach + k;
+  const cv::Rect window = cv::Rect(box.x - grow, box.y - grow, box.width + 2 * grow, box.height + 2 * grow) &
+                          cv::Rect(0, 0, image.width, image.height);
+  paper.local = paper_level(image.mat()(window), k);
+  paper.origin = window.tl();
+  // Only a light that varies across the marker is followed: the closing also varies with
+  // the pattern where blur leaves no pure paper between squares (on a 60 px marker
+  // defocused by 1.2 px, 6 % lower beside the border than at the crossings of the gaps,
+  // which pulled the outer squares' centroids 0.03 px further inwards), and by the noise.
+  const LevelHistogram closed(tree, white_region, paper.local, paper.origin);
+  if (closed.quantile(0.1) >= kMinPaperSpread * closed.quantile(0.9)) {
+    paper.local.release();
+    return paper;
+  }
+  // Scaled so that its upper quartile over the white region is the white region's own:
+  // the lit paper is then measured against the level every other marker is.
+  if (const int quartile = closed.quantile(0.75); quartile > 0)
+    paper.local.convertTo(paper.local, CV_8U, paper.level / quartile);
+  return paper;
 }
 
 namespace {
@@ -264,10 +318,13 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
     c.family = f;
     c.white_region = t.region;
     c.white_area = tree.regions[t.region].area * pixel_area;
-    c.white_level =
-        params.centroid_reference == CentroidReference::local_white ? white_level(tree, t.region, image) : 255.0;
+    const int reach = params.dilation * patch.scale;
+    const PaperLevel paper = params.centroid_reference == CentroidReference::local_white
+                                 ? paper_under(tree, t.region, k, n2, image, reach)
+                                 : PaperLevel(255.0);
+    c.white_level = paper.level;
     for (int j = 0; j < n2; ++j) {
-      Blob b = measurer.measure(tree, k[j], image, binary, params.dilation * patch.scale, c.white_level);
+      Blob b = measurer.measure(tree, k[j], image, binary, reach, paper);
       b.centroid = patch.to_frame(b.centroid);
       b.mass *= pixel_area;
       c.blobs.push_back(b);

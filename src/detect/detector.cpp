@@ -83,7 +83,7 @@ auto fields(const DetectorParams& p) {
 bool operator==(const DetectorParams& a, const DetectorParams& b) { return fields(a) == fields(b); }
 
 double DetectionStats::total_ms() const {
-  return threshold_ms + regions_ms + candidates_ms + keypoints_ms + hypotheses_ms + decode_ms + pose_ms +
+  return threshold_ms + regions_ms + candidates_ms + keypoints_ms + hypotheses_ms + decode_ms + pose_ms + borders_ms +
          second_look_ms + expected_ms;
 }
 
@@ -93,6 +93,7 @@ DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   decoded += o.decoded, second_looks += o.second_looks, second_look_found += o.second_look_found;
   outline_reads += o.outline_reads, outline_found += o.outline_found, outline_reads_skipped += o.outline_reads_skipped;
   expected_reads += o.expected_reads, expected_found += o.expected_found;
+  borders += o.borders, border_found += o.border_found, borders_ms += o.borders_ms;
   skipped_by_budget += o.skipped_by_budget, second_looks_skipped += o.second_looks_skipped;
   past_deadline += o.past_deadline, skipped_by_deadline += o.skipped_by_deadline;
   second_look_ms += o.second_look_ms, expected_ms += o.expected_ms;
@@ -382,6 +383,105 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
     }
 }
 
+// What the trace tells of a border proposal: its outline and evidence (its stage is
+// filled in as it is read).
+BorderVerdict border_verdict(const detail::BorderProposal& proposal) {
+  BorderVerdict v;
+  v.outline = proposal.corners;
+  v.contrast = proposal.evidence->contrast, v.noise = proposal.evidence->noise;
+  v.ring = proposal.evidence->ring, v.darker_sides = proposal.evidence->darker_sides;
+  v.structure = proposal.evidence->structure;
+  return v;
+}
+
+// The border proposals of the frame (borders.cpp) that no detection covers, clearest
+// first, each looked at as a second look would (its patch binarised at its own midpoint,
+// its candidates decoded: a reading by the squares poses more precisely than one by the
+// outline), then read from its quadrilateral for the families whose border it may be;
+// one marker to a proposal. Within the frame's budget, outline reads and deadline.
+void read_borders(const std::vector<detail::BorderProposal>& proposals, const ImageView& work, const Camera& camera,
+                  const DetectorParams& p, const detail::SecondLook& look, const detail::Deadline& deadline,
+                  detail::RegionLabeller& labeller, PatchLook& patch_look, int* budget_left, DetectionStats& stats,
+                  std::vector<Detection>& found, int& reads_left, detail::ReadPlaces& read_places,
+                  DetectionTrace* trace) {
+  for (const detail::BorderProposal& proposal : proposals) {
+    const cv::Point2d centre =
+        (proposal.corners[0] + proposal.corners[1] + proposal.corners[2] + proposal.corners[3]) / 4;
+    BorderVerdict* border = trace ? &trace->borders.emplace_back(border_verdict(proposal)) : nullptr;
+    if (already_found(found, centre)) {  // read from another proposal of the same marker
+      if (border) border->stage = Stage::duplicate;
+      continue;
+    }
+    if (deadline.passed()) {
+      ++stats.skipped_by_deadline;
+      if (border) border->stage = Stage::deadline;
+      continue;
+    }
+    if (budget_left && *budget_left <= 0) {  // spent: no second look, here as anywhere
+      ++stats.second_looks_skipped;
+      if (border) border->stage = Stage::budget;
+      continue;
+    }
+    ++stats.borders;
+    const cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>(proposal.corners.begin(), proposal.corners.end()));
+    ++stats.second_looks;
+    const bool patched =
+        look_at_patch(work, box, look, p, camera, labeller, patch_look, stats, budget_left, nullptr, nullptr);
+    if (patched) {
+      if (trace) trace->second_looks.push_back(box);
+      const std::size_t before = found.size();
+      decode_candidates(patch_look.candidates, work, camera, p, true, deadline, stats, trace, found);
+      if (found.size() > before) {
+        stats.second_look_found += std::int64_t(found.size() - before);
+        stats.border_found += std::int64_t(found.size() - before);
+        if (border) border->stage = Stage::detected;
+        continue;
+      }
+    }
+    for (const Family& f : p.families) {
+      if (!proposal.families[std::size_t(f.n())]) continue;
+      OutlineVerdict* verdict = nullptr;
+      if (trace) {
+        verdict = &trace->outline_reads.emplace_back();
+        verdict->border = true;
+      }
+      std::optional<detail::OutlineReading> reading;
+      if (const std::optional<detail::EvenLight> even = detail::even_light(work, proposal.corners, f)) {
+        // Read with the light taken out (a shadow's edge across the marker), then placed back
+        // in the frame.
+        const cv::Point2d origin(even->origin);
+        std::array<cv::Point2d, 4> outline = proposal.corners;
+        for (cv::Point2d& q : outline) q -= origin;
+        detail::ReadPlaces none;
+        reading = read_one_outline(ImageView(even->pixels), outline, f, p, deadline, stats, stats.outline_reads,
+                                   reads_left, none, verdict);
+        if (verdict) verdict->outline = proposal.corners;
+        if (reading) reading->homography = cv::Matx33d(1, 0, origin.x, 0, 1, origin.y, 0, 0, 1) * reading->homography;
+      } else {
+        reading = read_one_outline(work, proposal.corners, f, p, deadline, stats, stats.outline_reads, reads_left,
+                                   read_places, verdict);
+      }
+      if (border && verdict && (border->stage == Stage::border || int(verdict->stage) > int(border->stage)))
+        border->family = f, border->stage = verdict->stage;
+      if (!reading || !add_outline_detection(*reading, f, camera, p, found, read_places, verdict)) continue;
+      if (border) border->stage = Stage::detected;
+      ++stats.decoded, ++stats.border_found, ++stats.outline_found;
+      break;
+    }
+    // Then the outlines of its patch's pieces, as a second look's: where the region's hull
+    // was not the border's outline (a spur of the ground, a corner cut off).
+    if (patched && !already_found(found, centre)) {
+      const std::size_t before = found.size();
+      read_outlines(patch_look.binary, patch_look.patch.frame, work, camera, p, deadline, stats, found, reads_left,
+                    read_places, trace);
+      if (found.size() > before) {
+        stats.border_found += std::int64_t(found.size() - before);
+        if (border) border->stage = Stage::detected;
+      }
+    }
+  }
+}
+
 // The markers the caller expects (FrameHints::expected) that the search did not find,
 // each looked for where it is expected: a second look at the place (its squares found
 // and decoded as the search's are, wherever in the patch the marker has moved), then the
@@ -455,6 +555,7 @@ const char* stage_name(Stage stage) {
     case Stage::geometry: return "geometry";
     case Stage::angle: return "angle";
     case Stage::collinearity: return "collinearity";
+    case Stage::border: return "border";
     case Stage::alignment: return "alignment";
     case Stage::structure: return "structure";
     case Stage::contrast: return "contrast";
@@ -570,20 +671,34 @@ std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints
                 read_places, trace);
   stats.expected_ms = elapsed_ms(start);
 
-  // The second look, around clusters that no detection covers: the optional work the
-  // deadline cuts (not sought at all once it has passed).
+  // Border proposals and the second look, around what no detection covers: the optional
+  // work the deadline cuts (not sought at all once it has passed). They share the frame's
+  // outline reads.
   bool cut = false;
   if (p.second_look && deadline.passed()) cut = true;
   if (p.second_look && !cut) {
-    start = Clock::now();
     detail::SecondLook look;
     look.sought.reset();
     for (const Family& f : p.families) look.sought.set(f.n());
-    std::vector<cv::Rect> taken;
-    for (const Detection& d : found)
-      taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
-    std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, image, look, taken);
+    const auto taken_boxes = [&] {
+      std::vector<cv::Rect> taken;
+      for (const Detection& d : found)
+        taken.push_back(cv::boundingRect(std::vector<cv::Point2f>(d.corners.begin(), d.corners.end())));
+      return taken;
+    };
     int outline_reads_left = kMaxOutlineReads;
+    start = Clock::now();
+    std::vector<detail::BorderProposal> refused;
+    const std::vector<detail::BorderProposal> proposals =
+        detail::propose_borders(s.tree, image, look, p.families, taken_boxes(), trace ? &refused : nullptr);
+    if (trace)
+      for (const detail::BorderProposal& r : refused) trace->borders.push_back(border_verdict(r));
+    read_borders(proposals, image, camera, p, look, deadline, s.labeller, s.patch_look, budget_left, stats, found,
+                 outline_reads_left, read_places, trace);
+    stats.borders_ms += elapsed_ms(start);
+
+    start = Clock::now();
+    std::vector<cv::Rect> boxes = detail::near_candidates(s.tree, s.binary, image, look, taken_boxes());
     if (int(boxes.size()) > p.max_second_looks) {
       stats.second_looks_skipped += std::int64_t(boxes.size()) - p.max_second_looks;
       boxes.resize(p.max_second_looks);

@@ -85,6 +85,10 @@ struct BinaryImage {
   cv::Mat1b to_mat() const;  // 255 black, 0 white (for debug images)
 };
 
+// Black pixels on the one-pixel ring just outside `box` (clipped to the image) over the
+// ring's length (1 when it lies wholly outside).
+double ring_ink(const BinaryImage& binary, const cv::Rect& box);
+
 // Black where a pixel is darker than the mean of the M x M window around it by more than
 // `offset`. `mean` is scratch space kept between frames.
 void threshold_mean(const ImageView& image, int window, int offset, cv::Mat& mean, BinaryImage& out);
@@ -170,6 +174,24 @@ struct RegionTree {
   }
 };
 
+// Calls f(y, x0, x1, region) for every run of the image (pixels x0 .. x1 - 1 of row y),
+// in raster order.
+template <class F>
+void for_all_runs(const RegionTree& tree, int height, F&& f) {
+  const int* run = tree.runs.data();
+  for (int y = 0; y < height; ++y) {
+    const std::uint64_t* row = tree.starts.data() + std::size_t(y) * tree.words_per_row;
+    int x0 = -1, region = -1;
+    for (int i = 0; i < tree.words_per_row; ++i)
+      for (std::uint64_t s = row[i]; s; s &= s - 1) {
+        const int x = i * 64 + __builtin_ctzll(s);
+        if (x0 >= 0) f(y, x0, x, region);
+        x0 = x, region = *run++;
+      }
+    if (x0 >= 0) f(y, x0, tree.width, region);
+  }
+}
+
 // Single-pass labelling over runs with union-find. The provisional labels live in the
 // tree's regions and become them in place, so the buffers are the tree's, kept between
 // frames. A binary image of 2^30 runs or more is refused (std::length_error).
@@ -181,6 +203,11 @@ class RegionLabeller {
  private:
   std::vector<int> row_x_[2];  // run starts of the row above and of this row, and the row's end
 };
+
+// The convex hull of some regions' pixels (their centres, frame pixels): that of the first
+// and last pixels of each row (a marker's regions have thousands of runs, and the hull of
+// their ends was most of the second look's time in frames crowded with markers).
+std::vector<cv::Point> region_hull(const RegionTree& tree, const std::vector<int>& regions);
 
 // ---------------------------------------------------------------- candidates.cpp
 // Where the pixels handed to find_candidates lie in the frame: a patch enlarged `scale`
@@ -225,14 +252,56 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
                      std::vector<Candidate>* area_rejected = nullptr, int* budget = nullptr,
                      std::vector<Candidate>* skipped = nullptr);
 
+// The paper's grey level that a blob's ink is measured against: `level` everywhere, or,
+// where `local` has pixels (from `origin` in the image measured), the paper under each
+// pixel, so that a shadow across a marker takes the light from its squares' ink and
+// not the paper from the light (see find_candidates). Inks stay in units of `level`.
+// Squares of at least this many pixels (a candidate's median) have paper between them:
+// gaps of 2 units are then 3.3 px or more, of which a pixel or more stays pure paper after
+// paper_under's 3 x 3 mean. Below it the closing would take mixed pixels for paper.
+constexpr int kMinLocalPaperArea = 25;
+// The paper under a candidate is followed pixel by pixel only where its darkest tenth is
+// under this share of its brightest tenth (over the white region): a shadow across the
+// marker (the field experiment's: 0.35 to 0.6 of the light) and not the pattern's own
+// unevenness under blur (6 % on a 60 px marker defocused by 1.2 px) nor a light gradient
+// across a frame (0.4 across 1280 px: 6 % across a 200 px marker).
+constexpr double kMinPaperSpread = 0.8;
+struct PaperLevel {
+  PaperLevel(double level = 255) : level(level) {}  // NOLINT: one level is the common case
+  double level;
+  cv::Mat1b local;
+  cv::Point origin;
+  // The ink of grey level g at pixel (x, y): how much darker than the paper there, in
+  // units of `level`.
+  double ink(int x, int y, double g) const {
+    if (local.empty()) return std::max(0.0, level - g);
+    const int u = x - origin.x, v = y - origin.y;
+    if (u < 0 || v < 0 || u >= local.cols || v >= local.rows) return std::max(0.0, level - g);
+    const double paper = std::max<double>(1, local(v, u));
+    return std::max(0.0, paper - g) * level / paper;
+  }
+};
+
+// The paper a candidate's `count` squares `kids` are measured against: the upper
+// quartile of its white region's grey levels, and, where its squares are large enough for
+// pure paper to show between them (a median of kMinLocalPaperArea pixels: gaps of 3.3 px
+// and more) and the light varies across it (kMinPaperSpread), the paper under each pixel
+// near them: the grey levels, averaged over 3 x 3 against the noise, closed (a dilation,
+// then an erosion) by a square one pixel wider each way than the largest square's box.
+// That fills every square and the border (2 units, narrower than any square) with the
+// paper around them, and keeps the edge of a shadow across the paper where it lies, so
+// that a shadowed square's ring of paper does not count as its ink.
+PaperLevel paper_under(const RegionTree& tree, int white_region, const int* kids, int count, const ImageView& image,
+                       int reach);
+
 // Centroids of blobs, its buffers reused from one blob to the next.
 class BlobMeasurer {
  public:
   // Centroid of the inverted grey image over `region` with its holes and the white pixels
   // within `reach` pixels of it that are nearer to it than to any other black pixel.
-  // `white` is the grey level that weighs zero (255 for the paper's plain inversion).
+  // `paper` is the grey level that weighs zero (255 for the paper's plain inversion).
   Blob measure(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary, int reach,
-               double white);
+               const PaperLevel& paper);
 
  private:
   std::vector<std::uint8_t> classes_, to_own_, to_other_;  // per pixel of the blob's window
@@ -276,6 +345,87 @@ bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look,
 // Black where a pixel lies below `level` (0..1) of the way from its local darkest to its
 // local brightest level, where those differ by a printed contrast; white elsewhere.
 void binarise_patch(const Patch& patch, double level, BinaryImage& out);
+
+// ---------------------------------------------------------------- shading.cpp
+// The paper's level under each pixel of `grey`: its levels closed (a dilation, then an
+// erosion) by a square of `feature` px, wider than its darkest features.
+cv::Mat1b paper_level(const cv::Mat& grey, int feature);
+
+// The neighbourhood of a marker's outline with the light taken out: each pixel over the
+// paper under it (paper_level, the darkest features being the 4-unit baselines), at the
+// lit paper's level.
+struct EvenLight {
+  cv::Mat1b pixels;
+  cv::Point origin;  // the frame pixel of pixels(0, 0)
+};
+// None where the light is even along the marker's white ring (its dimmest tenth at
+// kMinPaperSpread of its brightest or more, as paper_under decides for candidates) or the
+// outline is under 1.67 px per unit of `family` (no pure paper between its squares).
+std::optional<EvenLight> even_light(const ImageView& image, const std::array<cv::Point2d, 4>& outline,
+                                    const Family& family);
+
+// ---------------------------------------------------------------- borders.cpp
+// What the grey levels along a quadrilateral say of a marker's black border there, were
+// it the outer edge of a marker of some family: bands of the family's units along its
+// four sides, sampled on their middle four fifths.
+struct BorderEvidence {
+  double contrast = 0;     // the margin's mean grey level (a unit outside) minus the border's (its middle unit)
+  double noise = 0;        // the standard deviation of those samples about their band's mean, pooled
+  double ring = 0;         // the white ring's mean level (its middle unit) above the border's, over
+                           // the contrast: about 1 for a sharp marker, less when blur mixes them
+  int darker_sides = 0;    // sides whose border band is darker than their own margin band
+  double structure = 0;    // the white ring and the lines between cells above the cells' cores, over
+                           // the contrast: about 1 for a sharp marker of the family, less blurred, about
+                           // 0 for another family's or none
+  double clarity() const;  // contrast over noise (noise at least one grey level)
+  // A marker's border: darker than the margin on every side (each side against its own
+  // margin, so that a shadow across the marker does not matter), by kMinBorderSeparation
+  // times the noise overall, with a white ring inside it (kMinRingShare) and the family's
+  // structure inside that (kMinStructure).
+  bool plausible() const;
+};
+// Speed bounds: they spare the outline reads of what is no marker, and a proposal they
+// refuse may still be a second look's cluster. Chosen on the field experiment's tuning set
+// (every frame, 3x3 and 6x6): of the borders read as markers, all had a contrast of 1.09
+// noise or more, a ring of 0.085 or more and a structure of 0.198 or more but one (a 3x3
+// at -0.17, found by its patch's squares); of the proposals whose reads failed these
+// bounds refuse 56 % (3x3) and 10 % (6x6), and on the validation set 87 % and 42 % (the
+// letters of a printed page: structure -0.16 to -0.51) at the cost of 8 of 772 markers
+// read (6x6), which a second look may still find.
+constexpr double kMinBorderSeparation = 1;
+constexpr double kMinRingShare = 0.08;
+constexpr double kMinStructure = 0.15;
+// A marker's border, with what joined it, is a region of kMinBorderSize px or more (a
+// border of one or two pixels, under that, cannot be told from its margin) that covers
+// kMinBorderFill to kMaxBorderFill of its box: in the field experiment's tuning set every
+// border read as a marker covered 0.106 to 0.582 and was 20 px or more (validation set:
+// 0.104 to 0.562, 18 px). Thin lines and solid blobs, most of a photo's regions, are not.
+constexpr int kMinBorderSize = 16;
+constexpr double kMinBorderFill = 0.05, kMaxBorderFill = 0.7;
+// A black region's convex hull is a quadrilateral when the largest quadrilateral of its
+// simplified outline covers this share of its area.
+constexpr double kMinQuadFill = 0.85;
+
+// The evidence along `corners` (the outer edge, frame pixels, clockwise on screen) for a
+// marker of `family`; none when they span no homography.
+std::optional<BorderEvidence> border_evidence(const ImageView& image, const std::array<cv::Point2d, 4>& corners,
+                                              const Family& family);
+
+struct BorderProposal {
+  std::array<cv::Point2d, 4> corners;       // frame pixels, clockwise on screen
+  std::optional<BorderEvidence> evidence;   // for the family it is clearest for (of those it passes for)
+  std::bitset<Family::kMaxN + 1> families;  // the families (bit n) whose border it plausibly is
+  int region = -1;                          // the black region of the frame's binary image
+};
+
+// The outer edges of the black regions of the frame's binary image that may be markers'
+// borders: regions of `look`'s sizes (no more than 4:1) touching none of the `taken`
+// boxes, whose convex hull is a quadrilateral and whose border evidence is plausible for
+// one of `families`; the clearest first. Those refused on their evidence go to `refused`
+// when it is not null.
+std::vector<BorderProposal> propose_borders(const RegionTree& tree, const ImageView& image, const SecondLook& look,
+                                            const std::vector<Family>& families, const std::vector<cv::Rect>& taken,
+                                            std::vector<BorderProposal>* refused = nullptr);
 
 // ---------------------------------------------------------------- outline.cpp
 // The quadrilateral outlines of the largest groups of black pieces of a patch's binary

@@ -68,8 +68,8 @@ inline const std::array<Tunable, kTunables>& tunables() {
           0, 255),
       field<&DetectorParams::second_look>(
           "second-look", "Second look",
-          "Look again, enlarged and with a local threshold, at small isolated clusters where no marker was "
-          "found: far, small and motion-blurred markers",
+          "Look again where no marker was found: at black regions shaped and shaded like a marker's border, and "
+          "at small isolated clusters (enlarged, with a local threshold): shadowed, blurred, far and small markers",
           0, 1),
       field<&DetectorParams::max_ink_ratio>(
           "max-ink-ratio", "Maximum ink ratio",

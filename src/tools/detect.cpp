@@ -35,6 +35,8 @@ nlohmann::json stats_json(const DetectionStats& s) {
             {"outline_reads", s.outline_reads},
             {"outline_found", s.outline_found},
             {"outline_reads_skipped", s.outline_reads_skipped},
+            {"borders", s.borders},
+            {"border_found", s.border_found},
             {"skipped_by_budget", s.skipped_by_budget},
             {"second_looks_skipped", s.second_looks_skipped},
             {"past_deadline", s.past_deadline},
@@ -47,6 +49,7 @@ nlohmann::json stats_json(const DetectionStats& s) {
             {"hypotheses", s.hypotheses_ms},
             {"decode", s.decode_ms},
             {"pose", s.pose_ms},
+            {"borders", s.borders_ms},
             {"second_look", s.second_look_ms},
             {"total", s.total_ms()}}}};
 }
@@ -85,7 +88,20 @@ nlohmann::json outline_json(const OutlineVerdict& v) {
                         {"smear", v.smear},
                         {"defocus", v.defocus}};
   if (v.reading) out["reading"] = io::id_json(*v.reading);
+  if (v.border) out["border"] = true;
   return out;
+}
+
+// One quadrilateral black region and its fate as a border proposal (--why).
+nlohmann::json border_json(const BorderVerdict& v) {
+  return {{"family", v.family.name()},
+          {"stage", stage_name(v.stage)},
+          {"outline", io::points_json({v.outline.begin(), v.outline.end()})},
+          {"contrast", v.contrast},
+          {"noise", v.noise},
+          {"ring", v.ring},
+          {"darker_sides", v.darker_sides},
+          {"structure", v.structure}};
 }
 
 }  // namespace
@@ -205,6 +221,8 @@ void add_detect_command(CLI::App& app, int& status) {
           for (const CandidateVerdict& v : trace.verdicts) out["candidates"].push_back(verdict_json(v));
           out["outline_reads"] = nlohmann::json::array();
           for (const OutlineVerdict& v : trace.outline_reads) out["outline_reads"].push_back(outline_json(v));
+          out["borders"] = nlohmann::json::array();
+          for (const BorderVerdict& v : trace.borders) out["borders"].push_back(border_json(v));
         }
         total += stats;
         if (!opt->debug_dir.empty()) {

@@ -334,8 +334,14 @@ TEST(FindCandidates, AMarkerIsOneCandidate) {
   std::set<int> expected;
   for (int g = 0; g < 9; ++g) expected.insert(a.at(raster_pixel(f.centers(id)[g], ppu, margin)));
   EXPECT_EQ(regions_of(c), expected);
+  std::vector<int> kids;
+  for (const Blob& b : c.blobs) kids.push_back(b.region);
+  const detail::PaperLevel paper =
+      detail::paper_under(a.tree, c.white_region, kids.data(), int(kids.size()), a.view(), 1);
+  EXPECT_TRUE(paper.local.empty());  // evenly lit: the white region's level everywhere
+  EXPECT_EQ(paper.level, c.white_level);
   for (const Blob& b : c.blobs) {
-    const Blob direct = detail::BlobMeasurer().measure(a.tree, b.region, a.view(), a.binary, 1, c.white_level);
+    const Blob direct = detail::BlobMeasurer().measure(a.tree, b.region, a.view(), a.binary, 1, paper);
     EXPECT_EQ(b.mass, direct.mass);
     EXPECT_EQ(b.centroid, direct.centroid);
     EXPECT_EQ(b.point, b.centroid);  // no distortion
@@ -405,10 +411,56 @@ TEST(FindCandidates, LocalWhiteIsTheUpperQuartileOfTheWhiteRegion) {
   const std::vector<Candidate> out = run(a, params_for({Family(3)}), stats);
   ASSERT_EQ(out.size(), 1u);
   EXPECT_EQ(out[0].white_level, expected);
+}
+
+TEST(FindCandidates, EachSquaresInkIsMeasuredAgainstThePaperAroundIt) {
+  // Squares of ink 0 on paper lit in three vertical bands (120, 180 and 240, a hard
+  // shadow's edges), none across a band's edge: each square's ink is its own pixels'
+  // darkness below the paper around it, so all nine weigh alike (144 px at the white
+  // level each, their rings of paper nothing). Against one paper level for the whole
+  // marker the shadowed squares' rings of paper would count as ink.
+  cv::Mat1b grey = boxed(100, 3, grid(12, 28, 12));
+  const cv::Mat1b black = grey == 0;
+  for (int y = 8; y < 103; ++y)
+    for (int x = 8; x < 103; ++x)
+      if (!black(y, x)) grey(y, x) = x < 37 ? 120 : x < 65 ? 180 : 240;
+  const Analysed a = analyse(grey, black);
+  DetectionStats stats;
+  const std::vector<Candidate> out = run(a, params_for({Family(3)}), stats);
+  ASSERT_EQ(out.size(), 1u);
+  const double level = out[0].white_level;
+  std::vector<int> kids;
   for (const Blob& b : out[0].blobs) {
-    const Blob direct = detail::BlobMeasurer().measure(a.tree, b.region, a.view(), a.binary, 1, expected);
-    EXPECT_EQ(b.mass, direct.mass);
+    EXPECT_NEAR(b.mass, 144 * level, 0.005 * 144 * level) << b.centroid;
+    kids.push_back(b.region);
   }
+  const detail::PaperLevel paper =
+      detail::paper_under(a.tree, out[0].white_region, kids.data(), int(kids.size()), a.view(), 1);
+  ASSERT_FALSE(paper.local.empty());
+  EXPECT_NEAR(paper.ink(30, 20, 120), 0, 1e-9);         // paper in the darkest band
+  EXPECT_NEAR(paper.ink(60, 20, 90), level / 2, 1e-9);  // half the paper's light, in the middle band
+  // One level for the marker: the first column's rings (48 px of paper at 120) weigh as ink.
+  const auto mass_at = [&](const Blob& b, const detail::PaperLevel& p) {
+    return detail::BlobMeasurer().measure(a.tree, b.region, a.view(), a.binary, 1, p).mass;
+  };
+  const Blob& dark = *std::min_element(out[0].blobs.begin(), out[0].blobs.end(),
+                                       [](const Blob& u, const Blob& v) { return u.centroid.x < v.centroid.x; });
+  EXPECT_EQ(mass_at(dark, detail::PaperLevel(level)), 144 * level + 48 * (level - 120));
+}
+
+TEST(FindCandidates, SmallSquaresAreMeasuredAgainstTheWhiteRegionsLevel) {
+  // Under kMinLocalPaperArea pixels a square, no pixel between squares is pure paper: the
+  // white region's level stands for every pixel.
+  const Analysed a = analyse(boxed(22, 1, grid(4, 6, 3)));
+  DetectionStats stats;
+  const std::vector<Candidate> out = run(a, params_for({Family(3)}), stats);
+  ASSERT_EQ(out.size(), 1u);
+  std::vector<int> kids;
+  for (const Blob& b : out[0].blobs) kids.push_back(b.region);
+  const detail::PaperLevel paper =
+      detail::paper_under(a.tree, out[0].white_region, kids.data(), int(kids.size()), a.view(), 1);
+  EXPECT_TRUE(paper.local.empty());
+  EXPECT_EQ(paper.level, out[0].white_level);
 }
 
 TEST(FindCandidates, PointsAreUndistortedCentroids) {

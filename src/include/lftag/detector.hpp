@@ -63,10 +63,13 @@ struct DetectorParams {
   int threshold_window = 16;  // M (paper: 16)
   int threshold_offset = 4;   // grey levels
 
-  // -- Second look: small, isolated clusters of black regions where no marker was found
-  //    (markers at about half a pixel per unit, whose gaps the frame's binary image closes)
-  //    are enlarged twice and binarised at the midpoint of their own dark and bright
-  //    levels, then go through the same stages; everything is measured in the frame.
+  // -- Second look, where no marker was found: black regions whose outline and grey
+  //    levels look like a marker's border (touching squares, a shadow across the marker),
+  //    and small, isolated clusters of black regions (markers at about half a pixel per
+  //    unit, whose gaps the frame's binary image closes), each enlarged if small,
+  //    binarised at the midpoint of its own dark and bright levels and taken through the
+  //    same stages, then read from its outline's grey levels; everything is measured in
+  //    the frame.
   bool second_look = true;
   int max_second_looks = 64;  // patches per frame at most, the work bound of a cluttered frame
 

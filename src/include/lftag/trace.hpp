@@ -42,6 +42,9 @@ struct DetectionStats {
   std::int64_t outline_reads = 0;          // outlines aligned and read where a patch gave no candidate
   std::int64_t outline_found = 0;          // detections read from outlines
   std::int64_t outline_reads_skipped = 0;  // outline reads not made: kMaxOutlineReads was reached
+  std::int64_t borders = 0;                // border proposals: black regions whose outline and grey levels
+                                           // look like a marker's border, where no marker was found
+  std::int64_t border_found = 0;           // detections read from them
   std::int64_t expected_reads = 0;         // expected markers (FrameHints) looked for where expected
   std::int64_t expected_found = 0;         // detections found so
   std::int64_t skipped_by_budget = 0;      // candidates not decoded: DetectorParams::max_candidates was spent
@@ -57,6 +60,7 @@ struct DetectionStats {
   double hypotheses_ms = 0;                // 16 initial poses and their evaluation
   double decode_ms = 0;                    // decoding
   double pose_ms = 0;                      // final pose
+  double borders_ms = 0;                   // proposing borders and reading them
   double second_look_ms = 0;               // finding, enlarging, binarising and labelling the patches
   double expected_ms = 0;                  // reading the expected markers (FrameHints)
   double total_ms() const;
@@ -73,6 +77,7 @@ enum class Stage {
   geometry,      // the geometry constraint, on every side of the hull
   angle,         // the angle constraint
   collinearity,  // the collinearity constraint (tau2)
+  border,        // border proposal: the grey levels along the quadrilateral show no marker's border
   alignment,     // outline read: the marker's structure did not align from the outline
   structure,     // outline read: the aligned structure correlated under 0.75
   contrast,      // outline read: too little contrast between the white ring and the cells
@@ -107,6 +112,7 @@ struct CandidateVerdict {
 struct OutlineVerdict {
   Family family{3};
   bool expected = false;                 // a read where the caller expected a marker (FrameHints)
+  bool border = false;                   // a read of a border proposal
   std::array<cv::Point2d, 4> outline{};  // the coarse outline read from, frame pixels
   Stage stage = Stage::detected;
   std::optional<TagId> reading;   // the id read, when reading ran
@@ -125,6 +131,20 @@ struct OutlineVerdict {
   double defocus = 0;             // Gaussian defocus found, units (sigma)
 };
 
+// One black region whose convex hull is a quadrilateral, and what its grey levels say of
+// a marker's border there (for the family it is clearest for): `border` when they refused
+// it, else the furthest stage its outline reads reached.
+struct BorderVerdict {
+  std::array<cv::Point2d, 4> outline{};  // frame pixels, clockwise on screen
+  Family family{3};
+  Stage stage = Stage::border;
+  double contrast = 0;   // the margin's grey level minus the border's
+  double noise = 0;      // their samples' standard deviation
+  double ring = 0;       // the white ring's level, from the border's (0) to the margin's (1)
+  int darker_sides = 0;  // sides whose border is darker than their margin
+  double structure = 0;  // ring and lines between cells above the cores, over the contrast
+};
+
 // What the stages saw, for debug images (see draw.hpp) and for tuning: filled only on request.
 struct DetectionTrace {
   cv::Mat binary;                                                 // 255 = black, as thresholded
@@ -134,6 +154,7 @@ struct DetectionTrace {
   std::vector<Detection> detections;
   std::vector<CandidateVerdict> verdicts;     // every topological candidate
   std::vector<OutlineVerdict> outline_reads;  // every outline read (and skipped)
+  std::vector<BorderVerdict> borders;         // every quadrilateral black region and its fate
   std::vector<cv::Rect> second_looks;         // the clusters looked at again
 };
 
