@@ -63,7 +63,14 @@ bool run_blur(const Options& options) {
             }
             std::mt19937_64 rng = seeded(options.seed, {0xb1a4, a, std::uint64_t(step), std::uint64_t(m)});
             const Pose pose = place(camera, jittered_center(camera, rng), kDistance, cv::Vec3d());  // upright
-            return run_trial(system, *renderer, ids[m], 1.0, pose);
+            const std::filesystem::path missed =
+                options.save_misses.empty()
+                    ? std::filesystem::path()
+                    : options.save_misses /
+                          (system.name() + "-blur-" + std::to_string(int(std::lround(angles[a] * 10))) + "ddeg-" +
+                           std::to_string(int(std::lround(fractions[step] * 100))) + "pct-marker" + std::to_string(m) +
+                           ".png");
+            return run_trial(system, *renderer, ids[m], 1.0, pose, missed);
           },
           [](const std::vector<Step>& steps) { return steps.back().found < steps.back().markers; }));
     }

@@ -693,10 +693,12 @@ const std::string& marker_id(const std::vector<std::string>& ids, const Clip& c,
 }
 
 // The frames of one clip as every system's camera delivers them: [system][frame].
+// Each system's frames of the clip, and after them the clip's marker-free twin: the same
+// frames with blank sheets (paper only) where the markers were, for the false positives.
 std::vector<std::vector<cv::Mat1b>> render_clip(const Clip& c, const std::vector<cv::Mat1b>& source_frames,
                                                 const std::vector<std::unique_ptr<FiducialSystem>>& systems,
                                                 const std::vector<std::vector<std::string>>& ids, std::uint64_t seed) {
-  std::vector<std::vector<cv::Mat1b>> out(systems.size());
+  std::vector<std::vector<cv::Mat1b>> out(systems.size() + 1);
   // One renderer per clip, over each frame's background in turn: with lens distortion,
   // tracing the pixel corners back is much of a frame's work. Bent sheets are drawn
   // with 4 x 4 samples at their edges (ray and cylinder meet at every sample).
@@ -722,6 +724,15 @@ std::vector<std::vector<cv::Mat1b>> render_clip(const Clip& c, const std::vector
         targets.push_back(sheet_target(*systems[s], marker_id(ids[s], c, int(m)), c.poses[f][m], c.extras[m]));
       out[s].push_back(sensor(c, optics(c, f, renderer.get(), back, light, targets), noise));
     }
+    std::vector<lftag::SceneTarget> blank;
+    for (std::size_t m = 0; m < c.extras.size(); ++m) {
+      lftag::SceneTarget t = sheet_target(*systems[0], marker_id(ids[0], c, int(m)), c.poses[f][m], c.extras[m]);
+      double paper = 0;
+      cv::minMaxLoc(t.albedo, nullptr, &paper);
+      t.albedo.setTo(paper);
+      blank.push_back(std::move(t));
+    }
+    out.back().push_back(sensor(c, optics(c, f, renderer.get(), back, light, blank), noise));
   }
   if (c.kbps > 0)
     for (auto& frames : out) frames = h264_round_trip(frames, c.kbps, int(kFps));
@@ -941,6 +952,8 @@ bool run_field(const Options& options) {
   std::vector<std::vector<std::vector<std::vector<Wrong>>>> wrongs(clips.size());
   // [clip][frame][system] every detection, for the confidences of right and wrong ids.
   std::vector<std::vector<std::vector<std::vector<Detected>>>> detections(clips.size());
+  // [clip][frame][system] detections in the clip's marker-free twin: false positives.
+  std::vector<std::vector<std::vector<int>>> false_positives(clips.size());
   int done = 0;
   // The quick plan's few frames are kept for the timing instead of being drawn again.
   const bool keep = options.quick;
@@ -957,7 +970,9 @@ bool run_field(const Options& options) {
     seen[ci].assign(c.frames, std::vector<std::vector<Seen>>(n));
     wrongs[ci].assign(c.frames, std::vector<std::vector<Wrong>>(n));
     detections[ci].assign(c.frames, std::vector<std::vector<Detected>>(n));
+    false_positives[ci].assign(c.frames, std::vector<int>(n, 0));
     for (int f = 0; f < c.frames; ++f) {
+      for (int s = 0; s < n; ++s) false_positives[ci][f][s] = int(systems[s]->detect(images[n][f]).size());
       truths[ci][f] = truth_of(c, f);
       for (int s = 0; s < n; ++s) {
         const std::vector<std::string> fid = frame_ids(c, s);
@@ -1111,6 +1126,25 @@ bool run_field(const Options& options) {
           detections_csv.row(options.systems[s], families[s], kSets[c.set], kInfo[c.condition].name, c.index, f, d.id,
                              int(std::find(fid.begin(), fid.end(), d.id) != fid.end()), d.path, d.confidence);
     }
+  // The marker-free twins: every detection is a false positive.
+  Csv fp_csv(options.out / "field_fp.csv",
+             {"system", "family", "set", "condition", "frames", "false_positives", "frames_with_false_positives"});
+  for (int s = 0; s < n; ++s)
+    for (int set = 0; set < 2; ++set)
+      for (int condition = 0; condition < kConditions; ++condition) {
+        int frames = 0, fp = 0, with = 0;
+        for (std::size_t ci = 0; ci < clips.size(); ++ci) {
+          const Clip& c = clips[ci];
+          if (c.set != set || c.condition != condition) continue;
+          for (int f = 0; f < c.frames; ++f) {
+            ++frames;
+            fp += false_positives[ci][f][s];
+            with += false_positives[ci][f][s] > 0;
+          }
+        }
+        if (frames > 0)
+          fp_csv.row(options.systems[s], families[s], kSets[set], kInfo[condition].name, frames, fp, with);
+      }
   struct Tally {
     int frames = 0, markers = 0, found = 0, wrong = 0;
     std::vector<double> translation_pct, rotation_deg;

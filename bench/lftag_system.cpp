@@ -73,6 +73,8 @@ std::vector<std::pair<std::string, double>> LftagSystem::counters() const {
           {"second_look_found", double(s.second_look_found)},
           {"outline_reads", double(s.outline_reads)},
           {"outline_found", double(s.outline_found)},
+          {"borders", double(s.borders)},
+          {"border_found", double(s.border_found)},
           {"outline_reads_skipped", double(s.outline_reads_skipped)},
           {"threshold_ms", s.threshold_ms},
           {"regions_ms", s.regions_ms},
@@ -81,6 +83,7 @@ std::vector<std::pair<std::string, double>> LftagSystem::counters() const {
           {"hypotheses_ms", s.hypotheses_ms},
           {"decode_ms", s.decode_ms},
           {"pose_ms", s.pose_ms},
+          {"borders_ms", s.borders_ms},
           {"second_look_ms", s.second_look_ms},
           {"total_ms", s.total_ms()}};
 }

@@ -46,9 +46,10 @@ int run(int argc, char** argv) {
   app.add_option("--threads", options.threads, "Worker threads for the accuracy experiments; timing uses one")
       ->check(CLI::Range(1, 64));
   app.add_option("--seed", options.seed, "Seed of every random choice (default 1)");
-  app.add_option("--save-misses", save_misses,
-                 "Write each video, range or field frame where a system missed a marker (field: or read a wrong id) "
-                 "to this directory (PNG)");
+  app.add_option(
+      "--save-misses", save_misses,
+      "Write each video, range, blur or field frame where a system missed a marker (field: or read a wrong id) "
+      "to this directory (PNG)");
   app.add_option("--conditions", conditions,
                  "Comma-separated conditions of the field and tracking experiments (default: all)");
   app.add_flag("--list", list, "List experiments and systems, then exit");

@@ -312,6 +312,21 @@ def field_wrong_table(results):
                   for system in systems])
 
 
+def field_fp_table(results):
+    rows, systems = {}, []
+    for r in read(results, "field_fp.csv"):
+        rows[(r["system"], r["set"], r["condition"])] = r
+        if r["system"] not in systems:
+            systems.append(r["system"])
+    conditions = [c for c in FIELD_CONDITIONS if any(k[2] == c for k in rows)]
+    def cell(system, c):
+        values = [rows[k]["false_positives"] if (k := (system, s, c)) in rows else "-" for s in FIELD_SETS]
+        return " / ".join(values)
+    frames = [sum(int(r["frames"]) for k, r in rows.items() if k[0] == systems[0] and k[1] == s) for s in FIELD_SETS]
+    return table([f"system (false positives in {frames[0]} / {frames[1]} marker-free frames)"] + conditions,
+                 [[system] + [cell(system, c) for c in conditions] for system in systems])
+
+
 def field_pose_table(results):
     rows, systems, conditions = field_rows(results)
     def cell(r):
@@ -429,6 +444,7 @@ def main(results):
                         ("Field recall (visible markers; tuning / validation)", field_recall_table),
                         ("Field: cut and occluded markers, reported apart", field_apart_table),
                         ("Field wrong ids", field_wrong_table),
+                        ("Field false positives: the clips' marker-free twins (blank sheets)", field_fp_table),
                         ("Field pose error by condition", field_pose_table),
                         ("Field pose error, all conditions", field_p90_table),
                         ("Field frame times", field_times_table),

@@ -55,6 +55,7 @@ EXPECTED = {
                           True),
     "field_times.csv": (["system", "set", "condition", "frames", "samples", "mean_ms", "median_ms", "p99_ms"], True),
     "field_wrong.csv": (["system", "set", "condition", "clip", "frame", "id", "nearest_id", "distance_edges"], False),
+    "field_fp.csv": (["system", "set", "condition", "frames", "false_positives", "frames_with_false_positives"], True),
     "field_clips.csv": (["set", "condition", "clip", "background", "codec", "kbps", "shadow_level", "pillbox_radius_px",
                          "k1", "black", "white", "gamma"], False),
     "tracking_summary.csv": (["system", "source", "set", "condition", "markers", "found_per_frame",
