@@ -398,7 +398,9 @@ BorderVerdict border_verdict(const detail::BorderProposal& proposal) {
 // first, each looked at as a second look would (its patch binarised at its own midpoint,
 // its candidates decoded: a reading by the squares poses more precisely than one by the
 // outline), then read from its quadrilateral for the families whose border it may be;
-// one marker to a proposal. Within the frame's budget, outline reads and deadline.
+// one marker to a proposal. Within the frame's budget, outline reads and deadline. (The
+// outlines of the patch's other pieces are left to the second look, which reads them
+// anyway where no marker was found.)
 void read_borders(const std::vector<detail::BorderProposal>& proposals, const ImageView& work, const Camera& camera,
                   const DetectorParams& p, const detail::SecondLook& look, const detail::Deadline& deadline,
                   detail::RegionLabeller& labeller, PatchLook& patch_look, int* budget_left, DetectionStats& stats,
@@ -467,17 +469,6 @@ void read_borders(const std::vector<detail::BorderProposal>& proposals, const Im
       if (border) border->stage = Stage::detected;
       ++stats.decoded, ++stats.border_found, ++stats.outline_found;
       break;
-    }
-    // Then the outlines of its patch's pieces, as a second look's: where the region's hull
-    // was not the border's outline (a spur of the ground, a corner cut off).
-    if (patched && !already_found(found, centre)) {
-      const std::size_t before = found.size();
-      read_outlines(patch_look.binary, patch_look.patch.frame, work, camera, p, deadline, stats, found, reads_left,
-                    read_places, trace);
-      if (found.size() > before) {
-        stats.border_found += std::int64_t(found.size() - before);
-        if (border) border->stage = Stage::detected;
-      }
     }
   }
 }

@@ -647,37 +647,17 @@ class PixelModel {
   // least margin over the data cells: how much worse the runner-up position of its square
   // fits, per pixel of a cell over the contrast squared.
   Reading read(TagId start, double pixels_per_unit, double contrast) const {
-    Reading best{start, 0, 0, 0, 0};
-    double best_rss = std::numeric_limits<double>::infinity();
-    // The fit that wins, by its residual alone: its margins (a third of a fit's work, and
-    // the same whichever fit they are taken from last) are measured once, for it alone.
-    double best_scale = 0, best_blur = 0;
-    cv::Mat1f best_fixed;
-    std::vector<std::array<cv::Mat1f, 4>> best_squares;
-    const bool smeared = smear_ != cv::Point2d();
-    // With a motion blur, which dominates, only the lesser optical blurs are tried.
-    const std::vector<double> blurs =
-        smeared ? std::vector<double>{0.0, 0.3, 0.6} : std::vector<double>{0.0, 0.3, 0.6, 1.0, 1.5, kMaxBlur};
-    for (const double scale : smeared ? kSmearScales : std::vector<double>{0}) {
-      // The coverage smeared once per length; each optical blur starts from it.
-      const cv::Mat1f kernel = scale == 0 ? cv::Mat1f() : smear_kernel(smear_ * scale);
-      const auto smear = [&](const cv::Mat1f& m) { return scale == 0 ? m : smeared_by(m, kernel); };
-      const cv::Mat1f fixed = smear(fixed_);
-      std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
-      for (std::size_t i = 0; i < cells_.size(); ++i)
-        for (int d = 0; d < 4; ++d) squares[i][d] = smear(squares_[i][d].share);
-      for (const double blur : blurs) {
-        const Fit fit = fit_at(blur * pixels_per_unit, fixed, squares, start, false);
-        if (fit.rss < best_rss) {
-          best_rss = fit.rss;
-          best_scale = scale, best_blur = blur, best_fixed = fixed, best_squares = squares;
-        }
-      }
-    }
-    if (best_fixed.empty()) return best;
-    const Fit fit = fit_at(best_blur * pixels_per_unit, best_fixed, best_squares, start, true);
-    best = {fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
-            cv::norm(smear_) * best_scale, fit.noise_margin, fit.evidence};
+    // The blurs are chosen on the whole marker of an id, one map smeared and blurred (the
+    // model is linear), and the cells fitted once at that blur; a fit that moves squares is
+    // the marker of another id, whose blur is chosen again. (Fitting the cells at every
+    // blur cost 15 fits of every square's map under motion blur, most of a frame's time.)
+    Choice choice = best_blur(start, pixels_per_unit);
+    Fit fit = fit_with(choice, pixels_per_unit, start);
+    if (fit.id != start)
+      if (const Choice again = best_blur(fit.id, pixels_per_unit); again != choice)
+        choice = again, fit = fit_with(choice, pixels_per_unit, fit.id);
+    Reading best{fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
+                 cv::norm(smear_) * choice.scale, fit.noise_margin, fit.evidence};
     if (!(fit.ink > 0.4 * contrast)) best.margin = 0;
     return best;
   }
@@ -706,6 +686,53 @@ class PixelModel {
     double evidence = 0;      // Reading::evidence
   };
 
+  // A motion blur's length, as a scale of the one found while aligning (0: none), and an
+  // optical blur (units).
+  struct Choice {
+    double scale = 0, blur = 0;
+    bool operator!=(const Choice& o) const { return scale != o.scale || blur != o.blur; }
+  };
+
+  // `m` blurred by a Gaussian of `sigma` pixels (nothing beyond the box).
+  static cv::Mat1f blurred_by(const cv::Mat1f& m, double sigma) {
+    if (!(sigma > 0.2)) return m;
+    cv::Mat1f out;
+    cv::GaussianBlur(m, out, cv::Size(), sigma, sigma, cv::BORDER_CONSTANT);
+    return out;
+  }
+
+  // The smear and optical blur under which the marker of `id` fits the grey levels best.
+  Choice best_blur(TagId id, double pixels_per_unit) const {
+    cv::Mat1f marker = fixed_.clone();
+    for (std::size_t i = 0; i < cells_.size(); ++i) {
+      const Coverage& square = squares_[i][id.digit(family_.data_index(cells_[i]))];
+      marker(square.rect) += square.share;
+    }
+    const bool smeared = smear_ != cv::Point2d();
+    // With a motion blur, which dominates, only the lesser optical blurs are tried.
+    const std::vector<double> blurs =
+        smeared ? std::vector<double>{0.0, 0.3, 0.6} : std::vector<double>{0.0, 0.3, 0.6, 1.0, 1.5, kMaxBlur};
+    Choice best;
+    double best_rss = std::numeric_limits<double>::infinity();
+    for (const double scale : smeared ? kSmearScales : std::vector<double>{0}) {
+      const cv::Mat1f moved = scale == 0 ? marker : smeared_by(marker, smear_kernel(smear_ * scale));
+      for (const double blur : blurs)
+        if (const double rss = sums_of(blurred_by(moved, blur * pixels_per_unit)).rss(); rss < best_rss)
+          best_rss = rss, best = {scale, blur};
+    }
+    return best;
+  }
+
+  // The cells fitted from `start` under `choice`, with their margins.
+  Fit fit_with(const Choice& choice, double pixels_per_unit, TagId start) const {
+    const cv::Mat1f kernel = choice.scale == 0 ? cv::Mat1f() : smear_kernel(smear_ * choice.scale);
+    const auto smear = [&](const cv::Mat1f& m) { return choice.scale == 0 ? m : smeared_by(m, kernel); };
+    std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
+    for (std::size_t i = 0; i < cells_.size(); ++i)
+      for (int d = 0; d < 4; ++d) squares[i][d] = smear(squares_[i][d].share);
+    return fit_at(choice.blur * pixels_per_unit, smear(fixed_), squares, start);
+  }
+
   // The variance of sum(delta * noise) over a rectangle of pixels, in units of the noise's
   // own variance, for noise correlated by rho_x^|dx| rho_y^|dy| between pixels:
   // delta' K delta, with K applied as two exponential filters each way (exact, linear).
@@ -727,25 +754,8 @@ class PixelModel {
   // The fit from `start` with the coverage (`fixed`, `smeared_squares`: smeared already)
   // blurred by a Gaussian of `sigma` pixels; its id, residual and ink only, unless
   // `margins` (the least gain, the noise margin and the evidence too).
-  Fit fit_at(double sigma, const cv::Mat1f& fixed, const std::vector<std::array<cv::Mat1f, 4>>& smeared_squares,
-             TagId start, bool margins) const {
-    // A copy only of what the sums below change (`total`); the squares' maps are read only.
-    const auto blurred = [&](const cv::Mat1f& m, bool copy) {
-      cv::Mat1f out;
-      if (sigma > 0.2)
-        cv::GaussianBlur(m, out, cv::Size(), sigma, sigma, cv::BORDER_CONSTANT);
-      else
-        out = copy ? m.clone() : m;
-      return out;
-    };
-    cv::Mat1f total = blurred(fixed, true);
-    std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
-    std::vector<int> digit(cells_.size());
-    for (std::size_t i = 0; i < cells_.size(); ++i) {
-      for (int d = 0; d < 4; ++d) squares[i][d] = blurred(smeared_squares[i][d], false);
-      digit[i] = start.digit(family_.data_index(cells_[i]));
-      total(squares_[i][0].rect) += squares[i][digit[i]];
-    }
+  // The sums of the fitted pixels' grey levels against the predicted coverage `total`.
+  Sums sums_of(const cv::Mat1f& total) const {
     Sums sums;
     for (int y = 0; y < total.rows; ++y)
       for (int x = 0; x < total.cols; ++x)
@@ -753,6 +763,21 @@ class PixelModel {
           const double g = grey_(y, x), c = total(y, x);
           sums.n += 1, sums.g += g, sums.gg += g * g, sums.c += c, sums.cc += c * c, sums.gc += g * c;
         }
+    return sums;
+  }
+
+  Fit fit_at(double sigma, const cv::Mat1f& fixed, const std::vector<std::array<cv::Mat1f, 4>>& smeared_squares,
+             TagId start) const {
+    // A copy only of what the sums below change (`total`); the squares' maps are read only.
+    cv::Mat1f total = blurred_by(fixed, sigma).clone();
+    std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
+    std::vector<int> digit(cells_.size());
+    for (std::size_t i = 0; i < cells_.size(); ++i) {
+      for (int d = 0; d < 4; ++d) squares[i][d] = blurred_by(smeared_squares[i][d], sigma);
+      digit[i] = start.digit(family_.data_index(cells_[i]));
+      total(squares_[i][0].rect) += squares[i][digit[i]];
+    }
+    Sums sums = sums_of(total);
     // The sums with cell i's square moved from its current position to d.
     const auto moved = [&](std::size_t i, int d) {
       Sums s = sums;
@@ -786,7 +811,6 @@ class PixelModel {
     Fit fit;
     fit.rss = sums.rss(&fit.ink);
     for (std::size_t i = 0; i < cells_.size(); ++i) fit.id = fit.id.with_digit(family_.data_index(cells_[i]), digit[i]);
-    if (!margins) return fit;
     fit.least_gain = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < cells_.size(); ++i)
       for (int d = 0; d < 4; ++d)

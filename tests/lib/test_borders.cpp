@@ -180,8 +180,8 @@ TEST(ProposeBorders, SquaresThatTouchEachOtherAndTheBorder) {
   });
   EXPECT_LE(t.by_candidates, 12) << "the set-up no longer joins the squares";  // 10 of 30
   EXPECT_GE(t.proposed, 20);                                                   // 22
-  EXPECT_GE(t.found, 27);                                                      // 29
-  EXPECT_GE(t.by_border, 15);                                                  // 19
+  EXPECT_GE(t.found, 27);                                                      // 28
+  EXPECT_GE(t.by_border, 11);  // 14; the second look reads the others from their pieces
   EXPECT_EQ(t.wrong, 0);
 }
 
