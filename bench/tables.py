@@ -369,23 +369,18 @@ def field_times_table(results, name="field_times.csv"):
                  [[system] + [cell(system, c) for c in conditions] for system in systems])
 
 
-def field_cost_ratio_table(results):
-    def ratios(name):
-        times = {(r["system"], r["condition"]): r for r in read(results, name) if r["set"] == "both"}
-        out = {}
-        for (system, c), r in times.items():
-            base = times.get(("apriltag-36h11-d2", c))
-            if base and system.startswith("lftag"):
-                out[(system, c)] = (float(r["mean_ms"]) / float(base["mean_ms"]),
-                                    float(r["p99_ms"]) / float(base["p99_ms"]))
-        return out
-    before, after = ratios("field_times.csv"), ratios("field_times_cost.csv")
-    systems = sorted({s for s, _ in after})
-    conditions = [c for c in FIELD_CONDITIONS if any(k[1] == c for k in after)]
+def field_ratio_table(results):
+    """LFTag's frame times over AprilTag 36h11 decimate 2's, measured in the same run."""
+    times = {(r["system"], r["condition"]): r for r in read(results, "field_times.csv") if r["set"] == "both"}
+    systems = [s for s in dict.fromkeys(k[0] for k in times) if s.startswith("lftag")]
+    conditions = [c for c in FIELD_CONDITIONS if any(k[1] == c for k in times)]
     def cell(system, c):
-        b, a = before.get((system, c)), after.get((system, c))
-        return f"{b[0]:.2f} / {b[1]:.2f} -> {a[0]:.2f} / {a[1]:.2f}" if a and b else "-"
-    return table(["system (mean / p99 over AprilTag d2's: before -> after)"] + conditions,
+        r, base = times.get((system, c)), times.get(("apriltag-36h11-d2", c))
+        if not r or not base:
+            return "-"
+        return (f"{float(r['mean_ms']) / float(base['mean_ms']):.2f} / "
+                f"{float(r['p99_ms']) / float(base['p99_ms']):.2f}")
+    return table(["system (mean / p99 over AprilTag d2's, same run)"] + conditions,
                  [[system] + [cell(system, c) for c in conditions] for system in systems])
 
 
@@ -448,10 +443,7 @@ def main(results):
                         ("Field pose error by condition", field_pose_table),
                         ("Field pose error, all conditions", field_p90_table),
                         ("Field frame times", field_times_table),
-                        ("Field frame times, after the outline reading's cost work",
-                         lambda r: field_times_table(r, "field_times_cost.csv")),
-                        ("Field frame times over AprilTag 36h11 decimate 2's in the same run, before / after",
-                         field_cost_ratio_table),
+                        ("Field frame times over AprilTag 36h11 decimate 2's", field_ratio_table),
                         ("Tracking: recall and wrong choices, tracking off / on", tracking_recall_table),
                         ("Tracking: jitter (error of the frame-to-frame pose change)", tracking_jitter_table),
                         ("Tracking: frame times, tracking off / on", tracking_times_table)]:

@@ -171,7 +171,7 @@ def main(bench, plot, work):
             fail(f"tables.py: no {section} table with {SYSTEMS[0]} in it")
         if "| " not in body:
             fail(f"tables.py: no {section} table")
-    for section in ("Field recall", "Field wrong ids", "Field frame times"):
+    for section in ("Field recall", "Field wrong ids", "Field false positives", "Field frame times"):
         body = run.stdout.split(f"### {section}", 1)[1].split("###", 1)[0] if f"### {section}" in run.stdout else ""
         if SYSTEMS[0] not in body or "| " not in body:
             fail(f"tables.py: no {section} table with {SYSTEMS[0]} in it")
