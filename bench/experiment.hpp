@@ -14,6 +14,7 @@ namespace bench {
 
 struct Options {
   bool quick = false;                // reduced form of every experiment (CI, smoke runs)
+  bool acceptance = false;           // field: the acceptance test's plan (bench/test_field.py)
   std::filesystem::path out;         // results directory
   std::vector<std::string> systems;  // selected system names
   std::filesystem::path data;        // opencv-doc's examples/data

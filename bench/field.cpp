@@ -78,6 +78,9 @@ struct Plan {
   int timed_clips, passes;  // the clips timed per condition and set, and the passes over them
 };
 constexpr Plan kFull{5, 10, 2, 1}, kQuick{1, 2, 1, 1};
+// The acceptance test's: 40 visible markers or more per condition and set (80 at 1080p),
+// enough that one marker more or less moves a rate by 2.5 points at most; not timed.
+constexpr Plan kAcceptance{2, 5, 0, 1};
 
 // How many sheets a clip holds, how large and how they move.
 struct Layout {
@@ -908,7 +911,7 @@ std::unique_ptr<ClipSource> field_clips(const Options& options, int clips, int f
 }
 
 bool run_field(const Options& options) {
-  const Plan plan = options.quick ? kQuick : kFull;
+  const Plan plan = options.quick ? kQuick : options.acceptance ? kAcceptance : kFull;
   const Sources sources = split_sources(options.data);
   const std::vector<Clip> clips = plan_clips(options, sources, plan.clips, plan.frames);
   // Videos are read forward: clips in the order of their source and first frame.

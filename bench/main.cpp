@@ -40,6 +40,8 @@ int run(int argc, char** argv) {
   options.threads = int(std::max(1u, std::thread::hardware_concurrency()));
   app.add_option("experiments", names, "Experiments to run (default: all; see --list)");
   app.add_flag("--quick", options.quick, "Reduced form of every experiment (CI; numbers are indicative only)");
+  app.add_flag("--acceptance", options.acceptance,
+               "field: the acceptance test's plan (2 clips of 5 frames per condition and set), not timed");
   app.add_option("--out", out, "Results directory (default: bench-results)");
   app.add_option("--systems", systems, "Comma-separated system names or prefixes (default: all)");
   app.add_option("--data", data, "opencv-doc's examples/data directory (false positives, speed)");

@@ -323,15 +323,21 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
                                  ? paper_under(tree, t.region, k, n2, image, reach)
                                  : PaperLevel(255.0);
     c.white_level = paper.level;
+    bool straddles = false;  // a square across a shadow's edge (kMaxPaperShift)
     for (int j = 0; j < n2; ++j) {
       Blob b = measurer.measure(tree, k[j], image, binary, reach, paper);
+      if (!paper.local.empty()) {
+        const Blob flat = measurer.measure(tree, k[j], image, binary, reach, PaperLevel(paper.level));
+        const double unit = std::sqrt(double(b.area)) / 3;
+        straddles = straddles || cv::norm(b.centroid - flat.centroid) > kMaxPaperShift * unit;
+      }
       b.centroid = patch.to_frame(b.centroid);
       b.mass *= pixel_area;
       c.blobs.push_back(b);
     }
     // Area constraint on the blobs' ink (the zeroth moments, robust at a few pixels),
-    // perspective taken out.
-    if (!(perspective_free_ink_ratio(c.blobs) <= params.max_ink_ratio)) {
+    // perspective taken out; a square whose ink depends on the paper model has none to go by.
+    if (straddles || !(perspective_free_ink_ratio(c.blobs) <= params.max_ink_ratio)) {
       if (area_rejected) area_rejected->push_back(std::move(c));
       continue;
     }

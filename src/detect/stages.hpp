@@ -266,6 +266,13 @@ constexpr int kMinLocalPaperArea = 25;
 // unevenness under blur (6 % on a 60 px marker defocused by 1.2 px) nor a light gradient
 // across a frame (0.4 across 1280 px: 6 % across a 200 px marker).
 constexpr double kMinPaperSpread = 0.8;
+// Where the paper is followed, each square's centroid is measured against the one level
+// too; a square whose centroid the choice moves by this much (units: a third of its side)
+// straddles the shadow's edge, where neither level is its paper, and the candidate is not
+// read by its blobs (half the distance between two of a square's positions: the paper
+// model alone could decide its digit). A 3x3 square across a shadow's edge in the field
+// experiment moved 1.9 units, and was read a unit off with the local paper alone.
+constexpr double kMaxPaperShift = 0.5;
 struct PaperLevel {
   PaperLevel(double level = 255) : level(level) {}  // NOLINT: one level is the common case
   double level;

@@ -718,3 +718,46 @@ TEST(FindCandidates, FamiliesShareTheRegionTree) {
   ASSERT_EQ(out.size(), 1u);
   EXPECT_EQ(out[0].family, Family(3));
 }
+
+TEST(FindCandidates, ASquareAcrossAShadowsEdgeIsNotReadByItsBlobs) {
+  // A hard shadow's edge (paper 240 | 110) through the middle column of squares, and the
+  // local threshold drawing `strip` rows of the shadowed paper below the top one into its
+  // black region: against the paper under it the strip weighs nothing, against the one
+  // level it weighs as ink. When that choice moves the square's centroid by more than
+  // kMaxPaperShift units (a third of its side), the candidate is not read by its blobs.
+  const auto shift_and_count = [](int strip) {
+    cv::Mat1b grey = boxed(100, 3, grid(12, 28, 12));
+    cv::Mat1b black = grey == 0;
+    black(cv::Rect(51, 29, 6, strip)).setTo(255);
+    for (int y = 8; y < 103; ++y)
+      for (int x = 8; x < 103; ++x)
+        if (grey(y, x) != 0) grey(y, x) = x < 51 ? 240 : 110;
+    const Analysed a = analyse(grey, black);
+    DetectionStats stats;
+    DetectorParams p = params_for({Family(3)});
+    p.max_ink_ratio = 100;  // the ink ratio is not what is tested
+    const std::vector<Candidate> out = run(a, p, stats);
+    // The top middle square's centroid under each paper model.
+    const int region = a.at(47, 20);
+    std::vector<int> kids;
+    for (int i = 0; i < int(a.tree.regions.size()); ++i)
+      if (a.tree.regions[i].area >= 100 && a.tree.regions[i].area < 400) kids.push_back(i);
+    const int white = a.tree.regions[region].parent;
+    const detail::PaperLevel local = detail::paper_under(a.tree, white, kids.data(), int(kids.size()), a.view(), 1);
+    EXPECT_FALSE(local.local.empty());
+    const detail::Blob with_local = detail::BlobMeasurer().measure(a.tree, region, a.view(), a.binary, 1, local);
+    const detail::Blob flat =
+        detail::BlobMeasurer().measure(a.tree, region, a.view(), a.binary, 1, detail::PaperLevel(local.level));
+    const double unit = std::sqrt(double(with_local.area)) / 3;
+    return std::make_pair(cv::norm(with_local.centroid - flat.centroid) / unit, out.size());
+  };
+  // Just under the bound: read by its blobs; just over: not.
+  const auto [under, read] = shift_and_count(10);
+  EXPECT_GT(under, 0.4);
+  EXPECT_LT(under, detail::kMaxPaperShift);
+  EXPECT_EQ(read, 1u);
+  const auto [over, refused] = shift_and_count(12);
+  EXPECT_GT(over, detail::kMaxPaperShift);
+  EXPECT_LT(over, 0.6);
+  EXPECT_EQ(refused, 0u);
+}
