@@ -18,10 +18,7 @@
 // and beside it), so below the first row there is at most a label for every other pixel,
 // as well as at most a run for every pixel: the 1-px checkerboard, which has both, is the
 // worst case, 4 + 28 / 2 bytes a pixel, and 2.4 more for the children and the starts.
-#include <limits>
 #include <stdexcept>
-
-#include <opencv2/imgproc.hpp>
 
 #include "stages.hpp"
 
@@ -262,24 +259,6 @@ void RegionLabeller::label(const BinaryImage& bin, RegionTree& tree) {
       ++placed;
     }
   }
-}
-
-std::vector<cv::Point> region_hull(const RegionTree& tree, const std::vector<int>& regions) {
-  if (regions.empty()) return {};
-  int y0 = tree.regions[regions[0]].y0, y1 = tree.regions[regions[0]].y1;
-  for (const int r : regions) y0 = std::min(y0, tree.regions[r].y0), y1 = std::max(y1, tree.regions[r].y1);
-  std::vector<std::pair<int, int>> rows(  // first and last pixel of each row
-      y1 - y0 + 1, {std::numeric_limits<int>::max(), std::numeric_limits<int>::min()});
-  for (const int r : regions)
-    tree.for_each_run(r, [&](int y, int x0, int x1) {
-      auto& [first, last] = rows[y - y0];
-      first = std::min(first, x0), last = std::max(last, x1 - 1);
-    });
-  std::vector<cv::Point> ends, hull;
-  for (int y = y0; y <= y1; ++y)
-    if (const auto [first, last] = rows[y - y0]; first <= last) ends.emplace_back(first, y), ends.emplace_back(last, y);
-  cv::convexHull(ends, hull);
-  return hull;
 }
 
 }  // namespace lftag::detail

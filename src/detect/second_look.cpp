@@ -92,6 +92,41 @@ int find_root(std::vector<int>& parent, int i) {
   return i;
 }
 
+// Black pixels on the one-pixel ring just outside box b (clipped to the frame) over
+// the ring's length.
+double ring_ink(const BinaryImage& binary, const Cluster& b) {
+  int black = 0, count = 0;
+  auto visit = [&](int x, int y) {
+    if (x < 0 || y < 0 || x >= binary.width || y >= binary.height) return;
+    ++count;
+    black += binary.black(x, y);
+  };
+  for (int x = b.x0 - 1; x <= b.x1 + 1; ++x) visit(x, b.y0 - 1), visit(x, b.y1 + 1);
+  for (int y = b.y0; y <= b.y1; ++y) visit(b.x0 - 1, y), visit(b.x1 + 1, y);
+  return count ? double(black) / count : 1.0;
+}
+
+// The convex hull of some regions' pixels (frame pixels): that of the first and last
+// pixels of each row (a marker's regions have thousands of runs, and the hull of their
+// ends was most of the search's time in frames crowded with markers).
+std::vector<cv::Point> region_hull(const RegionTree& tree, const std::vector<int>& regions) {
+  if (regions.empty()) return {};
+  int y0 = tree.regions[regions[0]].y0, y1 = tree.regions[regions[0]].y1;
+  for (const int r : regions) y0 = std::min(y0, tree.regions[r].y0), y1 = std::max(y1, tree.regions[r].y1);
+  std::vector<std::pair<int, int>> rows(  // first and last pixel of each row
+      y1 - y0 + 1, {std::numeric_limits<int>::max(), std::numeric_limits<int>::min()});
+  for (const int r : regions)
+    tree.for_each_run(r, [&](int y, int x0, int x1) {
+      auto& [first, last] = rows[y - y0];
+      first = std::min(first, x0), last = std::max(last, x1 - 1);
+    });
+  std::vector<cv::Point> ends, hull;
+  for (int y = y0; y <= y1; ++y)
+    if (const auto [first, last] = rows[y - y0]; first <= last) ends.emplace_back(first, y), ends.emplace_back(last, y);
+  cv::convexHull(ends, hull);
+  return hull;
+}
+
 // Black pixels on the outline of region g's convex hull `hull` moved out by a tenth of its
 // size (at least two pixels), over the outline's length: unlike its box's ring, this stays
 // on the white margin of a turned sheet.
@@ -347,7 +382,7 @@ std::vector<cv::Rect> near_candidates(const RegionTree& tree, const BinaryImage&
     // on its white margin. Of the clusters in photos, about 2 in 1,000 pass.
     if (!marker_sized(w, h)) continue;
     if (!marker_like(c.ink, c.pieces, w, h, kMinClusterPieces) || c.larger_marker) continue;
-    const double ring = ring_ink(binary, cv::Rect(c.x0, c.y0, c.x1 - c.x0 + 1, c.y1 - c.y0 + 1));
+    const double ring = ring_ink(binary, c);
     if (ring > kMaxRingInk) continue;
     const cv::Rect box(c.x0, c.y0, w, h);
     const auto hull = [&] { return region_hull(tree, members_of(int(i))); };

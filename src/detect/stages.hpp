@@ -85,10 +85,6 @@ struct BinaryImage {
   cv::Mat1b to_mat() const;  // 255 black, 0 white (for debug images)
 };
 
-// Black pixels on the one-pixel ring just outside `box` (clipped to the image) over the
-// ring's length (1 when it lies wholly outside).
-double ring_ink(const BinaryImage& binary, const cv::Rect& box);
-
 // Black where a pixel is darker than the mean of the M x M window around it by more than
 // `offset`. `mean` is scratch space kept between frames.
 void threshold_mean(const ImageView& image, int window, int offset, cv::Mat& mean, BinaryImage& out);
@@ -203,11 +199,6 @@ class RegionLabeller {
  private:
   std::vector<int> row_x_[2];  // run starts of the row above and of this row, and the row's end
 };
-
-// The convex hull of some regions' pixels (their centres, frame pixels): that of the first
-// and last pixels of each row (a marker's regions have thousands of runs, and the hull of
-// their ends was most of the second look's time in frames crowded with markers).
-std::vector<cv::Point> region_hull(const RegionTree& tree, const std::vector<int>& regions);
 
 // ---------------------------------------------------------------- candidates.cpp
 // Where the pixels handed to find_candidates lie in the frame: a patch enlarged `scale`

@@ -136,17 +136,4 @@ void threshold_mean(const ImageView& image, int window, int offset, cv::Mat& scr
     threshold_box_filter(image.mat(), window, off, scratch, out);
 }
 
-double ring_ink(const BinaryImage& binary, const cv::Rect& box) {
-  int black = 0, count = 0;
-  const auto visit = [&](int x, int y) {
-    if (x < 0 || y < 0 || x >= binary.width || y >= binary.height) return;
-    ++count;
-    black += binary.black(x, y);
-  };
-  const int x0 = box.x, y0 = box.y, x1 = box.x + box.width - 1, y1 = box.y + box.height - 1;
-  for (int x = x0 - 1; x <= x1 + 1; ++x) visit(x, y0 - 1), visit(x, y1 + 1);
-  for (int y = y0; y <= y1; ++y) visit(x0 - 1, y), visit(x1 + 1, y);
-  return count ? double(black) / count : 1.0;
-}
-
 }  // namespace lftag::detail
