@@ -96,16 +96,37 @@ class SparseTemplate {
   // template smeared evenly along it, sampled there.
   SparseTemplate(const cv::Mat1f& templ, int stride, cv::Point2d smear = {}) {
     const int taps = smear == cv::Point2d() ? 1 : int(std::ceil(cv::norm(smear))) + 1;
+    // The taps' offsets from a sample are the same at every sample, the samples lying on
+    // whole pixels: so are their pixels' offsets and bilinear weights.
+    struct Tap {
+      double x, y;  // offset
+      int dx, dy;   // of the pixel above and left
+      float fx, fy;
+    };
+    std::vector<Tap> offsets;
+    int least_dx = 0, most_dx = 0, least_dy = 0, most_dy = 0;
+    for (int i = 0; i < taps && taps > 1; ++i) {
+      const double f = double(i) / (taps - 1) - 0.5;
+      Tap t{f * smear.x, f * smear.y, int(std::floor(f * smear.x)), int(std::floor(f * smear.y)), 0, 0};
+      t.fx = float(t.x - t.dx), t.fy = float(t.y - t.dy);
+      offsets.push_back(t);
+      least_dx = std::min(least_dx, t.dx), most_dx = std::max(most_dx, t.dx);
+      least_dy = std::min(least_dy, t.dy), most_dy = std::max(most_dy, t.dy);
+    }
     double sum = 0;
     for (int y = stride / 2; y < templ.rows; y += stride)
       for (int x = stride / 2; x < templ.cols; x += stride) {
         double value = templ(y, x);
         if (taps > 1) {
           value = 0;
-          for (int i = 0; i < taps; ++i) {
-            const double f = double(i) / (taps - 1) - 0.5;
-            value += bilinear_at(templ, float(x + f * smear.x), float(y + f * smear.y));
-          }
+          if (x + least_dx >= 0 && x + most_dx + 1 < templ.cols && y + least_dy >= 0 && y + most_dy + 1 < templ.rows)
+            for (const Tap& t : offsets) {
+              const float* a = templ[y + t.dy] + x + t.dx;
+              const float* b = templ[y + t.dy + 1] + x + t.dx;
+              value += (1 - t.fy) * ((1 - t.fx) * a[0] + t.fx * a[1]) + t.fy * ((1 - t.fx) * b[0] + t.fx * b[1]);
+            }
+          else  // near the template's edge, which repeats
+            for (const Tap& t : offsets) value += bilinear_at(templ, float(x + t.x), float(y + t.y));
           value /= taps;
         }
         points_.push_back({float(x), float(y), float(value)});
@@ -536,6 +557,43 @@ cv::Mat1f smeared_by(const cv::Mat1f& image, const cv::Mat1f& kernel) {
   return out;
 }
 
+// std::floor of a value well within int's range, without the library call that std::floor
+// is on a baseline x86-64 build (most of a pixel model's construction went to it).
+int floor_int(double v) {
+  const int t = int(v);
+  return v < t ? t - 1 : t;
+}
+
+// Whether unit point `u` lies in `s` (left and top edges included).
+bool marker_holds(const UnitRect& s, cv::Point2d u) {
+  return u.x >= s.x && u.x < s.x + s.width && u.y >= s.y && u.y < s.y + s.height;
+}
+
+// Bounds, in units, of every point of a frame pixel (a little wider, for rounding).
+struct UnitBounds {
+  double x0, y0, x1, y1;
+  bool within(const UnitRect& s) const { return x0 >= s.x && x1 < s.x + s.width && y0 >= s.y && y1 < s.y + s.height; }
+  bool apart(const UnitRect& s) const { return x1 < s.x || x0 >= s.x + s.width || y1 < s.y || y0 >= s.y + s.height; }
+};
+
+// The bounds of the pixel centred at `centre` under `to_units`; none when the pixel
+// crosses the horizon, where its points do not lie between its corners' images.
+std::optional<UnitBounds> unit_bounds(const cv::Matx33d& to_units, cv::Point2d centre) {
+  constexpr double kRounding = 1e-7;  // units; points computed apart differ by ~1e-13
+  UnitBounds b{HUGE_VAL, HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+  double first_w = 0;
+  for (const cv::Point2d corner :
+       {cv::Point2d(-0.5, -0.5), cv::Point2d(0.5, -0.5), cv::Point2d(0.5, 0.5), cv::Point2d(-0.5, 0.5)}) {
+    const cv::Vec3d q = to_units * cv::Vec3d(centre.x + corner.x, centre.y + corner.y, 1);
+    if (first_w == 0) first_w = q[2];
+    if (!(q[2] * first_w > 0)) return std::nullopt;
+    const double ux = q[0] / q[2], uy = q[1] / q[2];
+    b.x0 = std::min(b.x0, ux), b.x1 = std::max(b.x1, ux), b.y0 = std::min(b.y0, uy), b.y1 = std::max(b.y1, uy);
+  }
+  b.x0 -= kRounding, b.y0 -= kRounding, b.x1 += kRounding, b.y1 += kRounding;
+  return b;
+}
+
 // A marker's pixels and their predicted ink: each pixel's share of the marker's black
 // (the area of the pixel that the black covers under the homography, then blurred by the
 // optics), split into what is fixed (border, baselines) and what each data cell's square
@@ -586,12 +644,39 @@ class PixelModel {
     // Area shares by supersampling each pixel (about four samples per unit).
     const int k = std::clamp(int(std::ceil(4 / pixels_per_unit)), 2, 8);
     const float weight = 1.0f / float(k * k);
-    const auto inside = [](const UnitRect& s, const cv::Point2d& u) {
-      return u.x >= s.x && u.x < s.x + s.width && u.y >= s.y && u.y < s.y + s.height;
-    };
     const int n = family.n();
     std::vector<int> slot(family.cell_count(), -1);
     for (int i = 0; i < int(cells_.size()); ++i) slot[cells_[i]] = i;
+    std::vector<std::array<UnitRect, 4>> square_at(family.cell_count());  // per cell and position
+    for (int g = 0; g < family.cell_count(); ++g)
+      for (int d = 0; d < 4; ++d) square_at[g][d] = family.square(g, family.is_baseline(g) ? 0 : d);
+    // `times` samples of pixel (x, y) that lie in one place: cell g (-1: the border, -2:
+    // none), under the squares of the positions `covered`.
+    const auto add = [&](int y, int x, int g, const std::array<bool, 4>& covered, int times) {
+      for (int t = 0; t < times; ++t) {  // one at a time, as single samples add up
+        if (g == -1) fixed_(y, x) += weight;
+        if (g < 0) continue;
+        if (family.is_baseline(g)) {
+          if (covered[0]) fixed_(y, x) += weight;
+          continue;
+        }
+        for (int d = 0; d < 4; ++d)
+          if (covered[d]) {
+            Coverage& cov = squares_[slot[g]][d];
+            cov.share(y - cov.rect.y, x - cov.rect.x) += weight;
+          }
+      }
+    };
+    std::vector<cv::Point2d> sample_offsets;  // from the pixel's centre
+    for (int a = 0; a < k; ++a)
+      for (int c = 0; c < k; ++c) sample_offsets.emplace_back((c + 0.5) / k - 0.5, (a + 0.5) / k - 0.5);
+    const UnitRect marker{0, 0, double(side), double(side)}, inside_border{2, 2, side - 4.0, side - 4.0};
+    const auto cell_of = [](double ux, double uy) {  // column and row, maybe beyond the grid
+      return cv::Point(floor_int((ux - 4) / 6), floor_int((uy - 4) / 6));
+    };
+    const auto grid_index = [&](cv::Point cell) {  // -2: between the grid and the border
+      return cell.x < 0 || cell.y < 0 || cell.x >= n || cell.y >= n ? -2 : cell.y * n + cell.x;
+    };
     for (int y = 0; y < box_.height; ++y)
       for (int x = 0; x < box_.width; ++x) {
         const cv::Point2d centre(box_.x + x, box_.y + y);
@@ -601,27 +686,56 @@ class PixelModel {
         // background).
         use_(y, x) = cu.x >= -0.5 && cu.x < side + 0.5 && cu.y >= -0.5 && cu.y < side + 0.5;
         if (!use_(y, x) && !(cu.x >= -2 && cu.x < side + 2 && cu.y >= -2 && cu.y < side + 2)) continue;
-        for (int a = 0; a < k; ++a)
-          for (int b = 0; b < k; ++b) {
-            const cv::Point2d u = apply(to_units, centre + cv::Point2d((b + 0.5) / k - 0.5, (a + 0.5) / k - 0.5));
-            if (!(u.x >= 0 && u.x < side && u.y >= 0 && u.y < side)) continue;
-            if (u.x < 2 || u.y < 2 || u.x >= side - 2 || u.y >= side - 2) {
-              fixed_(y, x) += weight;  // the border
-              continue;
-            }
-            const int c = int(std::floor((u.x - 4) / 6)), r = int(std::floor((u.y - 4) / 6));
-            if (c < 0 || r < 0 || c >= n || r >= n) continue;
-            const int g = r * n + c;
-            if (family.is_baseline(g)) {
-              if (inside(family.square(g, 0), u)) fixed_(y, x) += weight;
-              continue;
-            }
-            for (int d = 0; d < 4; ++d)
-              if (inside(family.square(g, d), u)) {
-                Coverage& cov = squares_[slot[g]][d];
-                cov.share(y - cov.rect.y, x - cov.rect.x) += weight;
-              }
+        // A pixel whose corners lie in one region of the layout (the margin, the border,
+        // the white between squares, the part of a cell that the same positions cover)
+        // has all its samples there: they lie between its corners, the homography being
+        // projective where all four are on one side of the horizon.
+        if (const std::optional<UnitBounds> b = unit_bounds(to_units, centre)) {
+          if (b->apart(marker)) continue;
+          std::array<bool, 4> covered{};
+          if (b->within(marker) && b->apart(inside_border)) {
+            add(y, x, -1, covered, k * k);
+            continue;
           }
+          if (b->within(inside_border) && cell_of(b->x0, b->y0) == cell_of(b->x1, b->y1)) {
+            const int g = grid_index(cell_of(b->x0, b->y0));
+            bool decided = true;
+            for (int d = 0; d < 4 && decided && g >= 0; ++d) {
+              covered[d] = b->within(square_at[g][d]);
+              decided = covered[d] || b->apart(square_at[g][d]);
+            }
+            if (decided) {
+              add(y, x, g, covered, k * k);
+              continue;
+            }
+          }
+        }
+        for (const cv::Point2d& offset : sample_offsets) {
+          const cv::Point2d u = apply(to_units, centre + offset);
+          if (!(u.x >= 0 && u.x < side && u.y >= 0 && u.y < side)) continue;
+          if (u.x < 2 || u.y < 2 || u.x >= side - 2 || u.y >= side - 2) {
+            fixed_(y, x) += weight;  // the border
+            continue;
+          }
+          // (Multiplying by a sixth can put a point a rounding error past a cell's edge in
+          // the neighbouring cell: those edges lie in white, and the squares' own edges
+          // decide below.)
+          const int c = floor_int((u.x - 4) * (1.0 / 6)), r = floor_int((u.y - 4) * (1.0 / 6));
+          if (c < 0 || r < 0 || c >= n || r >= n) continue;
+          const int g = r * n + c;
+          const UnitRect& s = square_at[g][0];  // position 0; the others one unit right and/or down
+          if (family.is_baseline(g)) {
+            if (marker_holds(s, u)) fixed_(y, x) += weight;
+            continue;
+          }
+          const bool at_x[2] = {u.x >= s.x && u.x < s.x + 3, u.x >= s.x + 1 && u.x < s.x + 4};
+          const bool at_y[2] = {u.y >= s.y && u.y < s.y + 3, u.y >= s.y + 1 && u.y < s.y + 4};
+          for (int d = 0; d < 4; ++d)
+            if (at_x[d >> 1] && at_y[d & 1]) {
+              Coverage& cov = squares_[slot[g]][d];
+              cov.share(y - cov.rect.y, x - cov.rect.x) += weight;
+            }
+        }
       }
   }
 
@@ -772,18 +886,24 @@ class PixelModel {
     cv::Mat1f total = blurred_by(fixed, sigma).clone();
     std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
     std::vector<int> digit(cells_.size());
+    // Where within its rectangle a cell's square can change anything at this blur: its maps
+    // are zero beyond the blur's reach, and a move changes no sum there.
+    std::vector<cv::Rect> reach(cells_.size());
     for (std::size_t i = 0; i < cells_.size(); ++i) {
       for (int d = 0; d < 4; ++d) squares[i][d] = blurred_by(smeared_squares[i][d], sigma);
       digit[i] = start.digit(family_.data_index(cells_[i]));
       total(squares_[i][0].rect) += squares[i][digit[i]];
+      reach[i] =
+          cv::boundingRect((squares[i][0] != 0) | (squares[i][1] != 0) | (squares[i][2] != 0) | (squares[i][3] != 0));
     }
     Sums sums = sums_of(total);
     // The sums with cell i's square moved from its current position to d.
     const auto moved = [&](std::size_t i, int d) {
       Sums s = sums;
       const cv::Rect& r = squares_[i][0].rect;
-      for (int y = 0; y < r.height; ++y)
-        for (int x = 0; x < r.width; ++x) {
+      const cv::Rect& e = reach[i];
+      for (int y = e.y; y < e.y + e.height; ++y)
+        for (int x = e.x; x < e.x + e.width; ++x) {
           if (!use_(r.y + y, r.x + x)) continue;
           const double delta = squares[i][d](y, x) - squares[i][digit[i]](y, x);
           if (delta == 0) continue;
@@ -812,9 +932,10 @@ class PixelModel {
     fit.rss = sums.rss(&fit.ink);
     for (std::size_t i = 0; i < cells_.size(); ++i) fit.id = fit.id.with_digit(family_.data_index(cells_[i]), digit[i]);
     fit.least_gain = std::numeric_limits<double>::infinity();
+    std::vector<std::array<double, 4>> gain(cells_.size());  // of moving cell i's square to d
     for (std::size_t i = 0; i < cells_.size(); ++i)
       for (int d = 0; d < 4; ++d)
-        if (d != digit[i]) fit.least_gain = std::min(fit.least_gain, moved(i, d).rss() - fit.rss);
+        if (d != digit[i]) fit.least_gain = std::min(fit.least_gain, gain[i][d] = moved(i, d).rss() - fit.rss);
 
     // The noise margin. With grey = prediction + noise, moving a square changes the
     // prediction by p = ink * delta (delta: the change of its coverage), and the fit worsens
@@ -846,17 +967,22 @@ class PixelModel {
     fit.noise_margin = fit.evidence = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < cells_.size(); ++i) {
       const cv::Rect& r = squares_[i][0].rect;
+      const cv::Rect& e = reach[i];
       for (int d = 0; d < 4; ++d) {
         if (d == digit[i]) continue;
-        cv::Mat1d delta(r.size(), 0.0);
-        for (int y = 0; y < r.height; ++y)
-          for (int x = 0; x < r.width; ++x)
-            if (use_(r.y + y, r.x + x)) delta(y, x) = squares[i][d](y, x) - squares[i][digit[i]](y, x);
+        if (e.empty()) {  // a square wholly outside the frame: moving it changes nothing
+          fit.noise_margin = fit.evidence = 0;
+          continue;
+        }
+        cv::Mat1d delta(e.size(), 0.0);
+        for (int y = 0; y < e.height; ++y)
+          for (int x = 0; x < e.width; ++x)
+            if (use_(r.y + e.y + y, r.x + e.x + x))
+              delta(y, x) = squares[i][d](e.y + y, e.x + x) - squares[i][digit[i]](e.y + y, e.x + x);
         const double predicted = fit.ink * fit.ink * delta.dot(delta);  // before correlated_power filters delta
         const double spread = fit.ink * fit.ink * variance * correlated_power(delta, rho_x, rho_y);
-        const double gain = moved(i, d).rss() - fit.rss;
-        fit.noise_margin = std::min(fit.noise_margin, spread > 0 ? gain / (2 * std::sqrt(spread)) : 0.0);
-        fit.evidence = std::min(fit.evidence, predicted > 0 ? gain / predicted : 0.0);
+        fit.noise_margin = std::min(fit.noise_margin, spread > 0 ? gain[i][d] / (2 * std::sqrt(spread)) : 0.0);
+        fit.evidence = std::min(fit.evidence, predicted > 0 ? gain[i][d] / predicted : 0.0);
       }
     }
     if (!std::isfinite(fit.noise_margin)) fit.noise_margin = 0;
