@@ -506,9 +506,11 @@ bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look,
     const std::uint8_t* g = patch.grey.ptr<std::uint8_t>(y);
     std::uint8_t* l = lo.ptr<std::uint8_t>(y / tile);
     std::uint8_t* h = hi.ptr<std::uint8_t>(y / tile);
-    for (int x = 0; x < patch.grey.cols; ++x) {
-      l[x / tile] = std::min(l[x / tile], g[x]);
-      h[x / tile] = std::max(h[x / tile], g[x]);
+    for (int t = 0; t < tw; ++t) {  // tile by tile: no division per pixel
+      const int end = std::min(patch.grey.cols, (t + 1) * tile);
+      std::uint8_t least = l[t], most = h[t];
+      for (int x = t * tile; x < end; ++x) least = std::min(least, g[x]), most = std::max(most, g[x]);
+      l[t] = least, h[t] = most;
     }
   }
   cv::erode(lo, lo, cv::Mat());  // 3 x 3
@@ -528,9 +530,10 @@ void binarise_patch(const Patch& patch, double level, BinaryImage& binary) {
     const std::uint8_t* l = patch.dark.ptr<std::uint8_t>(y);
     const std::uint8_t* h = patch.bright.ptr<std::uint8_t>(y);
     std::uint64_t* bits = binary.bits.data() + std::size_t(y) * binary.words_per_row;
-    for (int x = 0; x < grey.cols; ++x) {
+    for (int x = 0; x < grey.cols; ++x) {  // without a branch per pixel
       const int range = h[x] - l[x];
-      if (range >= 24 && (g[x] - l[x]) * 256 < fixed * range) bits[x >> 6] |= std::uint64_t{1} << (x & 63);
+      const bool black = range >= 24 && (g[x] - l[x]) * 256 < fixed * range;
+      bits[x >> 6] |= std::uint64_t{black} << (x & 63);
     }
   }
 }
