@@ -96,22 +96,14 @@ class SparseTemplate {
   // template smeared evenly along it, sampled there.
   SparseTemplate(const cv::Mat1f& templ, int stride, cv::Point2d smear = {}) {
     const int taps = smear == cv::Point2d() ? 1 : int(std::ceil(cv::norm(smear))) + 1;
-    // The taps' offsets from a sample are the same at every sample, the samples lying on
-    // whole pixels: so are their pixels' offsets and bilinear weights.
-    struct Tap {
-      double x, y;  // offset
-      int dx, dy;   // of the pixel above and left
-      float fx, fy;
-    };
-    std::vector<Tap> offsets;
-    int least_dx = 0, most_dx = 0, least_dy = 0, most_dy = 0;
+    // The taps' offsets from a sample, and how far they reach (whole pixels).
+    std::vector<cv::Point2d> offsets;
+    int reach_x = 0, reach_y = 0;
     for (int i = 0; i < taps && taps > 1; ++i) {
       const double f = double(i) / (taps - 1) - 0.5;
-      Tap t{f * smear.x, f * smear.y, int(std::floor(f * smear.x)), int(std::floor(f * smear.y)), 0, 0};
-      t.fx = float(t.x - t.dx), t.fy = float(t.y - t.dy);
-      offsets.push_back(t);
-      least_dx = std::min(least_dx, t.dx), most_dx = std::max(most_dx, t.dx);
-      least_dy = std::min(least_dy, t.dy), most_dy = std::max(most_dy, t.dy);
+      offsets.emplace_back(f * smear.x, f * smear.y);
+      reach_x = std::max(reach_x, int(std::ceil(std::abs(f * smear.x))));
+      reach_y = std::max(reach_y, int(std::ceil(std::abs(f * smear.y))));
     }
     double sum = 0;
     for (int y = stride / 2; y < templ.rows; y += stride)
@@ -119,14 +111,19 @@ class SparseTemplate {
         double value = templ(y, x);
         if (taps > 1) {
           value = 0;
-          if (x + least_dx >= 0 && x + most_dx + 1 < templ.cols && y + least_dy >= 0 && y + most_dy + 1 < templ.rows)
-            for (const Tap& t : offsets) {
-              const float* a = templ[y + t.dy] + x + t.dx;
-              const float* b = templ[y + t.dy + 1] + x + t.dx;
-              value += (1 - t.fy) * ((1 - t.fx) * a[0] + t.fx * a[1]) + t.fy * ((1 - t.fx) * b[0] + t.fx * b[1]);
+          // Well inside the template bilinear_at's clamps change nothing: the same sums
+          // without them.
+          if (x - reach_x >= 0 && x + reach_x + 2 < templ.cols && y - reach_y >= 0 && y + reach_y + 2 < templ.rows)
+            for (const cv::Point2d& t : offsets) {
+              const float tx = float(x + t.x), ty = float(y + t.y);
+              const int x0 = int(tx), y0 = int(ty);
+              const float fx = tx - x0, fy = ty - y0;
+              const float* a = templ[y0] + x0;
+              const float* b = templ[y0 + 1] + x0;
+              value += (1 - fy) * ((1 - fx) * a[0] + fx * a[1]) + fy * ((1 - fx) * b[0] + fx * b[1]);
             }
-          else  // near the template's edge, which repeats
-            for (const Tap& t : offsets) value += bilinear_at(templ, float(x + t.x), float(y + t.y));
+          else
+            for (const cv::Point2d& t : offsets) value += bilinear_at(templ, float(x + t.x), float(y + t.y));
           value /= taps;
         }
         points_.push_back({float(x), float(y), float(value)});
