@@ -114,14 +114,7 @@ class SparseTemplate {
           // Well inside the template bilinear_at's clamps change nothing: the same sums
           // without them.
           if (x - reach_x >= 0 && x + reach_x + 2 < templ.cols && y - reach_y >= 0 && y + reach_y + 2 < templ.rows)
-            for (const cv::Point2d& t : offsets) {
-              const float tx = float(x + t.x), ty = float(y + t.y);
-              const int x0 = int(tx), y0 = int(ty);
-              const float fx = tx - x0, fy = ty - y0;
-              const float* a = templ[y0] + x0;
-              const float* b = templ[y0 + 1] + x0;
-              value += (1 - fy) * ((1 - fx) * a[0] + fx * a[1]) + fy * ((1 - fx) * b[0] + fx * b[1]);
-            }
+            for (const cv::Point2d& t : offsets) value += bilinear_inside(templ, float(x + t.x), float(y + t.y));
           else
             for (const cv::Point2d& t : offsets) value += bilinear_at(templ, float(x + t.x), float(y + t.y));
           value /= taps;
@@ -164,18 +157,19 @@ class SparseTemplate {
   double correlation(const cv::Mat1f& image, const cv::Matx33f& w) const {
     if (!inside(image, w)) return correlation_of(w, [&](float x, float y) { return bilinear_at(image, x, y); });
     // Every sample well inside: the same sums without the clamps at the image's edges.
-    const float* data = image[0];
-    const std::size_t step = image.step1();
-    return correlation_of(w, [&](float x, float y) {
-      const int x0 = int(x), y0 = int(y);
-      const float fx = x - x0, fy = y - y0;
-      const float* a = data + std::size_t(y0) * step + x0;
-      const float* b = a + step;
-      return (1 - fy) * ((1 - fx) * a[0] + fx * a[1]) + fy * ((1 - fx) * b[0] + fx * b[1]);
-    });
+    return correlation_of(w, [&](float x, float y) { return bilinear_inside(image, x, y); });
   }
 
  private:
+  // bilinear_at where its clamps change nothing: 0 <= x, y and x + 1, y + 1 within the image.
+  static float bilinear_inside(const cv::Mat1f& image, float x, float y) {
+    const int x0 = int(x), y0 = int(y);
+    const float fx = x - x0, fy = y - y0;
+    const float* a = image[y0] + x0;
+    const float* b = image[y0 + 1] + x0;
+    return (1 - fy) * ((1 - fx) * a[0] + fx * a[1]) + fy * ((1 - fx) * b[0] + fx * b[1]);
+  }
+
   static float bilinear_at(const cv::Mat1f& image, float x, float y) {
     x = std::clamp(x, 0.0f, float(image.cols - 1)), y = std::clamp(y, 0.0f, float(image.rows - 1));
     const int x0 = std::min(int(x), std::max(image.cols - 2, 0)), y0 = std::min(int(y), std::max(image.rows - 2, 0));
@@ -668,8 +662,11 @@ class PixelModel {
     for (int a = 0; a < k; ++a)
       for (int c = 0; c < k; ++c) sample_offsets.emplace_back((c + 0.5) / k - 0.5, (a + 0.5) / k - 0.5);
     const UnitRect marker{0, 0, double(side), double(side)}, inside_border{2, 2, side - 4.0, side - 4.0};
-    const auto cell_of = [](double ux, double uy) {  // column and row, maybe beyond the grid
-      return cv::Point(floor_int((ux - 4) / 6), floor_int((uy - 4) / 6));
+    // Column and row, maybe beyond the grid. (Multiplying by a sixth can put a point a
+    // rounding error past a cell's edge in the next cell: those edges lie in white, and the
+    // squares' own edges decide whether a point is covered.)
+    const auto cell_of = [](double ux, double uy) {
+      return cv::Point(floor_int((ux - 4) * (1.0 / 6)), floor_int((uy - 4) * (1.0 / 6)));
     };
     const auto grid_index = [&](cv::Point cell) {  // -2: between the grid and the border
       return cell.x < 0 || cell.y < 0 || cell.x >= n || cell.y >= n ? -2 : cell.y * n + cell.x;
@@ -709,29 +706,22 @@ class PixelModel {
         }
         for (const cv::Point2d& offset : sample_offsets) {
           const cv::Point2d u = apply(to_units, centre + offset);
-          if (!(u.x >= 0 && u.x < side && u.y >= 0 && u.y < side)) continue;
-          if (u.x < 2 || u.y < 2 || u.x >= side - 2 || u.y >= side - 2) {
-            fixed_(y, x) += weight;  // the border
+          if (!marker_holds(marker, u)) continue;
+          std::array<bool, 4> covered{};
+          if (!marker_holds(inside_border, u)) {
+            add(y, x, -1, covered, 1);
             continue;
           }
-          // (Multiplying by a sixth can put a point a rounding error past a cell's edge in
-          // the neighbouring cell: those edges lie in white, and the squares' own edges
-          // decide below.)
-          const int c = floor_int((u.x - 4) * (1.0 / 6)), r = floor_int((u.y - 4) * (1.0 / 6));
-          if (c < 0 || r < 0 || c >= n || r >= n) continue;
-          const int g = r * n + c;
-          const UnitRect& s = square_at[g][0];  // position 0; the others one unit right and/or down
-          if (family.is_baseline(g)) {
-            if (marker_holds(s, u)) fixed_(y, x) += weight;
-            continue;
+          const int g = grid_index(cell_of(u.x, u.y));
+          if (g >= 0) {
+            // Position 0's square; the others lie one unit right (digits 2, 3) and/or down (1, 3).
+            const UnitRect& s = square_at[g][0];
+            const bool at_x[2] = {u.x >= s.x && u.x < s.x + 3, u.x >= s.x + 1 && u.x < s.x + 4};
+            const bool at_y[2] = {u.y >= s.y && u.y < s.y + 3, u.y >= s.y + 1 && u.y < s.y + 4};
+            for (int d = 0; d < 4; ++d)
+              covered[d] = family.is_baseline(g) ? marker_holds(s, u) : at_x[d >> 1] && at_y[d & 1];
           }
-          const bool at_x[2] = {u.x >= s.x && u.x < s.x + 3, u.x >= s.x + 1 && u.x < s.x + 4};
-          const bool at_y[2] = {u.y >= s.y && u.y < s.y + 3, u.y >= s.y + 1 && u.y < s.y + 4};
-          for (int d = 0; d < 4; ++d)
-            if (at_x[d >> 1] && at_y[d & 1]) {
-              Coverage& cov = squares_[slot[g]][d];
-              cov.share(y - cov.rect.y, x - cov.rect.x) += weight;
-            }
+          add(y, x, g, covered, 1);
         }
       }
   }
