@@ -472,6 +472,61 @@ TEST(Decode, ErrorMetricAndHomography) {
   EXPECT_TRUE(run(*p, p->keypoints, strict));
 }
 
+TEST(Decode, TheDefaultDecodingErrorBoundRefusesAFaintMarkerWhoseSquaresStrayFromTheirPositions) {
+  // tau3 at its defaults, the paper's 5e-4 (3x3) and 1e-3 (4x4). The error is the blobs'
+  // residual over the marker's size and the inner border's edge gradient, so squares
+  // that stray from their positions count for more on a fainter print. Each data square
+  // here strays 0.2 u, inside the cell residual bound, and the print is faded (to about
+  // 30 grey levels of contrast, a dim scene) until the error lies a fifth above the
+  // bound: tau3 alone refuses it. Faded less, to a tenth below the bound, it reads.
+  struct Case {
+    int n;
+    TagId id;
+    double tau3;  // the paper's
+  };
+  for (const Case& t : {Case{3, 6789, 5e-4}, Case{4, 123456, 1e-3}}) {
+    SCOPED_TRACE(t.n);
+    const Family f(t.n);
+    const double ppu = 6;
+    const auto p = prepare_raster(f, t.id, ppu);
+    ASSERT_TRUE(p);
+    Prepared strayed = *p;
+    for (int k = 0; k < f.data_cell_count(); ++k) {
+      cv::Point2d& c = strayed.candidate.blobs[p->blob_of_cell[f.grid_index(k)]].point;
+      c += 0.2 * ppu * cv::Point2d(k % 2 ? 1 : -1, k % 3 ? 1 : -1) * M_SQRT1_2;
+    }
+    DetectorParams open;  // tau3 out of the way
+    open.max_decode_error.fill(1e6);
+    const auto sharp = run(strayed, strayed.keypoints, open);
+    ASSERT_TRUE(sharp);
+    ASSERT_EQ(sharp->id, t.id);
+    ASSERT_LT(sharp->error, 0.2 * t.tau3);  // in full contrast well within the bound
+    const auto faded = [&](double error) {
+      Prepared out = strayed;
+      const double contrast = sharp->error / error;  // the edge gradient scales with it
+      cv::Mat1b image;
+      strayed.image.convertTo(image, CV_8U, contrast, 255 * (1 - contrast));
+      out.image = image;
+      return out;
+    };
+    const Prepared over = faded(1.2 * t.tau3), under = faded(0.9 * t.tau3);
+    DetectionStats stats;
+    const auto refused = detail::decode(over.candidate, over.keypoints, ImageView(over.image), over.camera,
+                                        DetectorParams{}, stats, nullptr);
+    ASSERT_TRUE(refused);
+    EXPECT_EQ(refused->verdict, detail::Verdict::residual);
+    EXPECT_GT(refused->error, t.tau3);
+    EXPECT_LT(refused->error, 1.3 * t.tau3);
+    const auto opened = run(over, over.keypoints, open);  // every other check passes
+    ASSERT_TRUE(opened);
+    EXPECT_EQ(opened->id, t.id);
+    const auto read = run(under, under.keypoints);
+    ASSERT_TRUE(read);
+    EXPECT_EQ(read->id, t.id);
+    EXPECT_GT(read->error, 0.8 * t.tau3);
+  }
+}
+
 TEST(Decode, NonFiniteOrWrappedProjectionsAreNoReading) {
   // Key points that put part of the marker behind the camera (the homography's scale
   // changes sign over the marker), or that are not finite, give no hypothesis to read:
