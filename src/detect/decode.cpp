@@ -137,7 +137,7 @@ auto bilinear(const ImageView& im, cv::Point2d p, Value value) {
 // Sobel gradient magnitude at a sub-pixel point, bilinear between pixel gradients.
 double gradient_at(const ImageView& im, cv::Point2d p) {
   const cv::Vec2d g = bilinear(im, p, [&](int x, int y) { return sobel(im, x, y); });
-  return std::hypot(g[0], g[1]);
+  return std::sqrt(g[0] * g[0] + g[1] * g[1]);  // std::hypot guards against overflow, at a cost
 }
 
 }  // namespace

@@ -357,7 +357,7 @@ bool look_at_patch(const ImageView& image, cv::Rect box, const detail::SecondLoo
                    int* budget_left, std::vector<detail::Candidate>* area_rejected,
                    std::vector<detail::Candidate>* skipped) {
   if (!detail::enlarge_patch(image, box, look, out.patch)) return false;
-  detail::binarise_patch(out.patch, 0.5, out.binary);
+  detail::binarise_patch(out.patch, out.binary);
   labeller.label(out.binary, out.tree);
   detail::find_candidates(out.tree, out.binary, ImageView(out.patch.grey), p, camera, out.candidates, stats,
                           out.patch.frame, area_rejected, budget_left, skipped);

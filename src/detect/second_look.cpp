@@ -15,6 +15,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
@@ -75,6 +76,9 @@ constexpr double kMaxSmallerMarkerSpread = 2.3;
 // on average) and which the frame's 16 px mean threshold did not resolve.
 constexpr double kResolvedMidGreyPerEdge = 0.6;
 constexpr double kResolvedFeatureWidth = 8;  // px
+// A patch pixel is black only where its local darkest and brightest levels differ by this
+// many grey levels or more: less is the grain of plain paper or ink, not a printed edge.
+constexpr int kMinPatchRange = 24;
 // ------------------------------------------------------------------------------
 
 struct Cluster {
@@ -501,16 +505,27 @@ bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look,
   const int window = std::max(9, side * scale / 3) | 1;
   const int tile = std::max(2, window / 3);
   const int tw = (patch.grey.cols + tile - 1) / tile, th = (patch.grey.rows + tile - 1) / tile;
-  cv::Mat1b lo(th, tw, std::uint8_t(255)), hi(th, tw, std::uint8_t(0));
-  for (int y = 0; y < patch.grey.rows; ++y) {
-    const std::uint8_t* g = patch.grey.ptr<std::uint8_t>(y);
-    std::uint8_t* l = lo.ptr<std::uint8_t>(y / tile);
-    std::uint8_t* h = hi.ptr<std::uint8_t>(y / tile);
-    for (int t = 0; t < tw; ++t) {  // tile by tile: no division per pixel
-      const int end = std::min(patch.grey.cols, (t + 1) * tile);
-      std::uint8_t least = l[t], most = h[t];
-      for (int x = t * tile; x < end; ++x) least = std::min(least, g[x]), most = std::max(most, g[x]);
-      l[t] = least, h[t] = most;
+  cv::Mat1b lo(th, tw), hi(th, tw);
+  const int cols = patch.grey.cols;
+  std::vector<std::uint8_t> least(static_cast<std::size_t>(cols)), most(least.size());
+  for (int band = 0; band < th; ++band) {
+    // Down each column of the band's rows first (whole rows at a time, the compiler's
+    // vectors), then along each tile's stretch of that.
+    const int top = band * tile, bottom = std::min(patch.grey.rows, top + tile);
+    const std::uint8_t* g = patch.grey.ptr<std::uint8_t>(top);
+    std::copy(g, g + cols, least.begin());
+    std::copy(g, g + cols, most.begin());
+    for (int y = top + 1; y < bottom; ++y) {
+      g = patch.grey.ptr<std::uint8_t>(y);
+      for (int x = 0; x < cols; ++x) least[std::size_t(x)] = std::min(least[std::size_t(x)], g[x]);
+      for (int x = 0; x < cols; ++x) most[std::size_t(x)] = std::max(most[std::size_t(x)], g[x]);
+    }
+    std::uint8_t* l = lo.ptr<std::uint8_t>(band);
+    std::uint8_t* h = hi.ptr<std::uint8_t>(band);
+    for (int t = 0; t < tw; ++t) {
+      const auto begin = std::size_t(t * tile), end = std::size_t(std::min(cols, (t + 1) * tile));
+      l[t] = *std::min_element(least.begin() + begin, least.begin() + end);
+      h[t] = *std::max_element(most.begin() + begin, most.begin() + end);
     }
   }
   cv::erode(lo, lo, cv::Mat());  // 3 x 3
@@ -520,20 +535,42 @@ bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look,
   return true;
 }
 
-void binarise_patch(const Patch& patch, double level, BinaryImage& binary) {
+namespace {
+
+// The lowest bits of 64 bytes of 0 or 1, the first byte's the word's lowest bit: eight
+// bytes at a time, each multiplied into its place among the top eight bits (no two
+// products share a bit, so nothing carries).
+std::uint64_t pack_flags(const std::array<std::uint8_t, 64>& flags) {
+  std::uint64_t word = 0;
+  for (int i = 0; i < 64; i += 8) {
+    std::uint64_t eight = 0;
+    for (int k = 0; k < 8; ++k) eight |= std::uint64_t{flags[std::size_t(i + k)]} << (8 * k);
+    word |= ((eight * 0x0102040810204080u) >> 56) << i;
+  }
+  return word;
+}
+
+}  // namespace
+
+void binarise_patch(const Patch& patch, BinaryImage& binary) {
   const cv::Mat& grey = patch.grey;
   binary.width = grey.cols, binary.height = grey.rows, binary.words_per_row = (grey.cols + 63) / 64;
   binary.bits.assign(std::size_t(binary.words_per_row) * grey.rows, 0);
-  const int fixed = int(std::lround(level * 256));
+  std::array<std::uint8_t, 64> black{};
   for (int y = 0; y < grey.rows; ++y) {
     const std::uint8_t* g = grey.ptr<std::uint8_t>(y);
     const std::uint8_t* l = patch.dark.ptr<std::uint8_t>(y);
     const std::uint8_t* h = patch.bright.ptr<std::uint8_t>(y);
     std::uint64_t* bits = binary.bits.data() + std::size_t(y) * binary.words_per_row;
-    for (int x = 0; x < grey.cols; ++x) {  // without a branch per pixel
-      const int range = h[x] - l[x];
-      const bool black = range >= 24 && (g[x] - l[x]) * 256 < fixed * range;
-      bits[x >> 6] |= std::uint64_t{black} << (x & 63);
+    for (int x0 = 0; x0 < grey.cols; x0 += 64) {
+      // 64 pixels flagged without a branch (the compiler's vectors), then packed.
+      const int n = std::min(64, grey.cols - x0);
+      for (int i = 0; i < n; ++i) {
+        const int dark = l[x0 + i], bright = h[x0 + i];
+        black[std::size_t(i)] = (bright - dark >= kMinPatchRange) & (2 * g[x0 + i] < dark + bright);
+      }
+      std::fill(black.begin() + n, black.end(), 0);
+      bits[x0 / 64] = pack_flags(black);
     }
   }
 }

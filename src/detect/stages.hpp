@@ -340,9 +340,9 @@ struct Patch {
 // The neighbourhood of `box` enlarged as `look` says; false when it is empty.
 bool enlarge_patch(const ImageView& image, cv::Rect box, const SecondLook& look, Patch& patch);
 
-// Black where a pixel lies below `level` (0..1) of the way from its local darkest to its
-// local brightest level, where those differ by a printed contrast; white elsewhere.
-void binarise_patch(const Patch& patch, double level, BinaryImage& out);
+// Black where a pixel lies below the midpoint of its local darkest and brightest levels,
+// where those differ by a printed contrast; white elsewhere.
+void binarise_patch(const Patch& patch, BinaryImage& out);
 
 // ---------------------------------------------------------------- shading.cpp
 // The paper's level under each pixel of `grey`: its levels closed (a dilation, then an

@@ -433,7 +433,7 @@ TEST(SecondLookPatch, ReopensOnePixelGapsBesideABrightMargin) {
   EXPECT_DOUBLE_EQ(back.x, patch.frame.origin.x + 0.5);
   EXPECT_DOUBLE_EQ(back.y, patch.frame.origin.y + 0.5);
   detail::BinaryImage patch_binary;
-  detail::binarise_patch(patch, 0.5, patch_binary);
+  detail::binarise_patch(patch, patch_binary);
   detail::RegionTree patch_tree;
   labeller.label(patch_binary, patch_tree);
   EXPECT_EQ(most_children(patch_tree), 9);
@@ -460,6 +460,46 @@ TEST(SecondLookPatch, AFlatPatchHasNoBlack) {
   detail::Patch patch;
   ASSERT_TRUE(detail::enlarge_patch(ImageView(flat), cv::Rect(20, 20, 20, 20), detail::SecondLook{}, patch));
   detail::BinaryImage binary;
-  detail::binarise_patch(patch, 0.5, binary);
+  detail::binarise_patch(patch, binary);
   for (std::uint64_t word : binary.bits) EXPECT_EQ(word, 0u);
+}
+
+TEST(SecondLookPatch, APixelIsBlackBelowTheMidpointOfItsLocalLevelsWhereTheyDifferByAPrintedContrast) {
+  // Every pixel of patches whose rows end inside, at and past a 64-pixel word: black
+  // exactly where 2 grey < dark + bright and bright - dark >= 24, with nothing past a
+  // row's end.
+  cv::RNG rng(7);
+  for (int width : {1, 63, 64, 65, 131}) {
+    detail::Patch patch;
+    patch.grey.create(5, width, CV_8UC1);
+    patch.dark.create(5, width, CV_8UC1);
+    patch.bright.create(5, width, CV_8UC1);
+    for (int y = 0; y < 5; ++y)
+      for (int x = 0; x < width; ++x) {
+        const int dark = rng.uniform(0, 256), bright = std::min(255, dark + rng.uniform(0, 60));
+        patch.dark.at<std::uint8_t>(y, x) = std::uint8_t(dark);
+        patch.bright.at<std::uint8_t>(y, x) = std::uint8_t(bright);
+        patch.grey.at<std::uint8_t>(y, x) = std::uint8_t(rng.uniform(dark, bright + 1));
+      }
+    detail::BinaryImage binary;
+    detail::binarise_patch(patch, binary);
+    ASSERT_EQ(binary.width, width);
+    ASSERT_EQ(binary.height, 5);
+    int black = 0;
+    for (int y = 0; y < 5; ++y) {
+      for (int x = 0; x < width; ++x) {
+        const int g = patch.grey.at<std::uint8_t>(y, x), dark = patch.dark.at<std::uint8_t>(y, x),
+                  bright = patch.bright.at<std::uint8_t>(y, x);
+        const bool expected = bright - dark >= 24 && 2 * g < dark + bright;
+        EXPECT_EQ(binary.black(x, y), expected) << width << " wide, at " << x << ", " << y;
+        black += expected;
+      }
+      if (width % 64) {
+        EXPECT_EQ(binary.row(y)[width / 64] >> (width % 64), 0u) << "past the end of row " << y;
+      }
+    }
+    if (width > 60) {
+      EXPECT_GT(black, width / 8);
+    }
+  }
 }
