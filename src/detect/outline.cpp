@@ -406,8 +406,7 @@ CellSamples sample_cell(const ImageView& image, const cv::Matx33d& h, int r, int
 
 struct CellFit {
   int digit = 0;
-  double rss = 0, runner_up_rss = 0;  // residual sums of squares of the best and second digits
-  double ink = 0;                     // the best model's paper minus ink level
+  double rss = 0;  // residual sum of squares
 };
 
 // Fits grey = paper - ink * coverage for each of the four square positions, the
@@ -428,7 +427,7 @@ CellFit fit_cell(const CellSamples& cell, double sigma) {
   mean /= kCellSamples;
   double sgg = 0;
   for (double g : cell.grey) sgg += (g - mean) * (g - mean);
-  std::array<double, 4> rss, ink;
+  std::array<double, 4> rss;
   for (int digit = 0; digit < 4; ++digit) {
     const auto& px = at[digit >> 1];
     const auto& py = at[digit & 1];
@@ -439,23 +438,18 @@ CellFit fit_cell(const CellSamples& cell, double sigma) {
         sc += cov, scc += cov * cov, sgc += g * cov;
       }
     const double var = scc - sc * sc / kCellSamples;  // sgc is centred already through g
-    ink[digit] = var > 0 ? -sgc / var : 0;
-    rss[digit] = ink[digit] > 0 ? sgg - sgc * sgc / var : sgg;
+    const double ink = var > 0 ? -sgc / var : 0;      // paper minus ink level
+    rss[std::size_t(digit)] = ink > 0 ? sgg - sgc * sgc / var : sgg;
   }
   CellFit fit;
   fit.digit = int(std::min_element(rss.begin(), rss.end()) - rss.begin());
-  fit.rss = rss[fit.digit];
-  fit.runner_up_rss = std::numeric_limits<double>::infinity();
-  for (int d = 0; d < 4; ++d)
-    if (d != fit.digit) fit.runner_up_rss = std::min(fit.runner_up_rss, rss[d]);
-  fit.ink = ink[fit.digit];
+  fit.rss = rss[std::size_t(fit.digit)];
   return fit;
 }
 
-// The id read from the data cells under homography h (true turn), and the least margin
-// of its cells (see OutlineReading::margin).
-std::pair<TagId, double> read_cells(const ImageView& image, const cv::Matx33d& h, const Family& family,
-                                    double pixels_per_unit, double contrast) {
+// The id read from the data cells under homography h (true turn): the start of the
+// pixel model's reading, which decides.
+TagId read_cells(const ImageView& image, const cv::Matx33d& h, const Family& family, double pixels_per_unit) {
   const int n = family.n();
   // Each data cell's digit: the square position whose blurred model fits the cell's grey
   // levels best (least squares, with the cell's own paper and ink levels), at the blur that
@@ -473,17 +467,10 @@ std::pair<TagId, double> read_cells(const ImageView& image, const cv::Matx33d& h
     if (rss < best_rss) best_rss = rss, best_fits = fits;
   }
   TagId id;
-  double margin = 1e9;
   int k = 0;
-  for (int g = 0; g < family.cell_count(); ++g) {
-    if (family.is_baseline(g)) continue;
-    const CellFit& fit = best_fits[k++];
-    // How much worse the runner-up fits, per sample, in units of the marker's contrast.
-    const double m = (fit.runner_up_rss - fit.rss) / (kCellSamples * contrast * contrast);
-    margin = std::min(margin, fit.ink > 0.4 * contrast ? m : 0.0);
-    id = id.with_digit(family.data_index(g), fit.digit);
-  }
-  return {id, margin};
+  for (int g = 0; g < family.cell_count(); ++g)
+    if (!family.is_baseline(g)) id = id.with_digit(family.data_index(g), best_fits[std::size_t(k++)].digit);
+  return id;
 }
 
 // The direction of a marker's edges, modulo 90 degrees (radians, in [0, pi/2)): the mean
@@ -759,7 +746,7 @@ class PixelModel {
         choice = again, fit = fit_with(choice, pixels_per_unit, fit.id);
     Reading best{fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
                  cv::norm(smear_) * choice.scale, fit.noise_margin, fit.evidence};
-    if (!(fit.ink > 0.4 * contrast)) best.margin = 0;
+    if (!(fit.ink > kMinModelInk * contrast)) best.margin = 0;
     return best;
   }
 
@@ -1521,7 +1508,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   const auto read_id = [&](const cv::Matx33d& under) -> std::optional<PixelModel::Reading> {
     const PixelModel model(image, under, family, out.pixels_per_unit, smear);
     if (!model.valid()) return std::nullopt;
-    const TagId sampled = read_cells(image, under, family, out.pixels_per_unit, white - black).first;
+    const TagId sampled = read_cells(image, under, family, out.pixels_per_unit);
     return model.read(sampled, out.pixels_per_unit, white - black);
   };
   if (deadline.passed()) return cut(out);

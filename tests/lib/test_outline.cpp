@@ -700,25 +700,26 @@ namespace {
 
 // A fronto-parallel 3x3 marker at `pixels_per_unit` on a 4-unit white margin, rendered by
 // exact area coverage, with data cell `cell`'s square moved `shift` units to the right of
-// where `id` puts it (its digit's bit 1 moves it one unit right); and its outer corners.
+// where `id` puts it (its digit's bit 1 moves it one unit right) and printed with `ink`
+// of the full ink's darkness; and its outer corners.
 struct Shifted {
   cv::Mat1b image;
   std::array<cv::Point2d, 4> corners;
 };
-Shifted shifted_marker(TagId id, int cell, double shift, double pixels_per_unit) {
+Shifted shifted_marker(TagId id, int cell, double shift, double pixels_per_unit, double ink = 1) {
   const Family f(3);
   constexpr int kFine = 20;  // grid cells per unit: shifts of 0.05 units
   const int margin = 4, side = f.side() + 2 * margin;
   cv::Mat1f grid(side * kFine, side * kFine, 1.0f);
-  const auto fill = [&](double x, double y, double w, double h) {
+  const auto fill = [&](double x, double y, double w, double h, double darkness = 1) {
     grid(cv::Rect(int(std::lround((x + margin) * kFine)), int(std::lround((y + margin) * kFine)),
-                  int(std::lround(w * kFine)), int(std::lround(h * kFine)))) = 0.0f;
+                  int(std::lround(w * kFine)), int(std::lround(h * kFine)))) = float(1 - darkness);
   };
   const double s = f.side();
   fill(0, 0, s, 2), fill(0, s - 2, s, 2), fill(0, 0, 2, s), fill(s - 2, 0, 2, s);
   for (int g = 0; g < f.cell_count(); ++g) {
     const UnitRect q = f.square(g, f.is_baseline(g) ? 0 : id.digit(f.data_index(g)));
-    fill(q.x + (g == cell ? shift : 0), q.y, q.width, q.height);
+    fill(q.x + (g == cell ? shift : 0), q.y, q.width, q.height, g == cell ? ink : 1);
   }
   const double ppc = pixels_per_unit / kFine;
   const cv::Size size(int(std::ceil(side * pixels_per_unit)), int(std::ceil(side * pixels_per_unit)));
@@ -768,6 +769,40 @@ TEST(OutlineReading, EveryCellMustShowMostOfTheDifferenceItsDigitMakes) {
         EXPECT_FALSE(acceptable(*reading, params)) << what << " read " << reading->id.to_decimal();
         EXPECT_LT(reading->evidence, kMinEvidence) << what;
         EXPECT_EQ(outline_stage(*reading, params), Stage::margin) << what;
+      }
+    }
+  }
+}
+
+TEST(OutlineReading, ASquareFadedIntoThePaperIsNoEvidence) {
+  // A data square printed fainter than the rest (glare, a shadow's edge) is no evidence
+  // for any position, whichever it seems to fit. At half the ink it reads. At 0.3 and a
+  // quarter it still fits its own position best but shows too little of the difference
+  // its digit makes (kMinEvidence); at a tenth it may fit another position, and the
+  // reading is refused all the same.
+  DetectorParams params;
+  const Family f(3);
+  const TagId id(6789);
+  const int cell = 4;
+  ASSERT_FALSE(f.is_baseline(cell));
+  for (const double ppu : {1.5, 4.0}) {
+    for (const auto& [ink, accepted] : {std::pair{1.0, true}, std::pair{0.5, true}, std::pair{0.3, false},
+                                        std::pair{0.25, false}, std::pair{0.1, false}}) {
+      const std::string what = std::to_string(ppu) + " px per unit, ink " + std::to_string(ink);
+      const Shifted m = shifted_marker(id, cell, 0, ppu, ink);
+      const auto reading = read_outline(ImageView(m.image), m.corners, f);
+      ASSERT_TRUE(reading) << what;
+      EXPECT_EQ(acceptable(*reading, params), accepted)
+          << what << ": margin " << reading->margin << ", evidence " << reading->evidence;
+      if (accepted) {
+        EXPECT_EQ(reading->id, id) << what;
+        EXPECT_GE(reading->evidence, kMinEvidence) << what;
+        continue;
+      }
+      EXPECT_EQ(outline_stage(*reading, params), Stage::margin) << what;
+      EXPECT_LT(reading->evidence, kMinEvidence) << what;
+      if (ink >= 0.25) {
+        EXPECT_EQ(reading->id, id) << what;
       }
     }
   }
