@@ -746,7 +746,7 @@ class PixelModel {
         choice = again, fit = fit_with(choice, pixels_per_unit, fit.id);
     Reading best{fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
                  cv::norm(smear_) * choice.scale, fit.noise_margin, fit.evidence};
-    if (!(fit.ink > 0)) best.margin = 0;  // squares no darker than the paper: nothing was read
+    if (!(fit.ink > kMinModelInk * contrast)) best.margin = 0;
     return best;
   }
 

@@ -517,6 +517,11 @@ constexpr double kMinBaselineGap = 0.25;
 // and detector tests' renders at the resolution and blur limits, whose right readings had
 // 0.37 (one) and 0.41 or more; the validation set's wrong ones had 0.16 at most.
 constexpr double kMinEvidence = 0.4;
+// The ink (paper minus ink level) that the pixel model fits to the whole marker must be
+// this share at least of the contrast measured between its white ring and its squares'
+// cores, or the reading has no margin: squares at the positions read that explain the
+// grey levels only with a faint print explain something else. A round share, not tuned.
+constexpr double kMinModelInk = 0.4;
 constexpr double kMaxSmear = 5;  // units: a motion blur must leave a unit of the cells' 6-unit pitch unsmeared
 // The first check `reading` fails (Stage::detected when it passes them all), and whether
 // it passes them all.
