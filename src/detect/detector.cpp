@@ -333,6 +333,7 @@ std::optional<detail::OutlineReading> read_one_outline(const ImageView& work, co
       verdict->correlation = reading->correlation, verdict->marker_correlation = reading->marker_correlation;
       verdict->contrast = reading->contrast, verdict->margin = reading->margin;
       verdict->noise_margin = reading->noise_margin, verdict->evidence = reading->evidence;
+      verdict->model_ink = reading->model_ink;
       verdict->pixels_per_unit = reading->pixels_per_unit, verdict->smear = reading->smear;
       verdict->defocus = reading->defocus;
     }

@@ -727,6 +727,7 @@ class PixelModel {
     double smear = 0;         // length of the motion blur that fits best, frame pixels
     double noise_margin = 0;  // OutlineReading::noise_margin
     double evidence = 0;      // OutlineReading::evidence
+    double ink = 0;           // OutlineReading::model_ink
   };
 
   // The id whose predicted pixels fit the grey levels best (least squares with the
@@ -744,10 +745,12 @@ class PixelModel {
     if (fit.id != start)
       if (const Choice again = best_blur(fit.id, pixels_per_unit); again != choice)
         choice = again, fit = fit_with(choice, pixels_per_unit, fit.id);
-    Reading best{fit.id, fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
-                 cv::norm(smear_) * choice.scale, fit.noise_margin, fit.evidence};
-    if (!(fit.ink > kMinModelInk * contrast)) best.margin = 0;
-    return best;
+    return {fit.id,
+            fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
+            cv::norm(smear_) * choice.scale,
+            fit.noise_margin,
+            fit.evidence,
+            contrast > 0 ? fit.ink / contrast : 0};
   }
 
  private:
@@ -1519,6 +1522,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   out.margin = reading->margin;
   out.noise_margin = reading->noise_margin;
   out.evidence = reading->evidence;
+  out.model_ink = reading->ink;
   out.smear = reading->smear / out.pixels_per_unit;
 
   // The final homography: the whole marker of the id read, every square in place, aligned
@@ -1560,6 +1564,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     if (again->id == out.id) {
       out.margin = std::min(out.margin, again->margin);
       out.noise_margin = std::min(out.noise_margin, again->noise_margin);
+      out.model_ink = std::min(out.model_ink, again->ink);
       out.evidence = again->evidence;  // the final alignment's: the first reading's is a start
       out.smear = std::max(out.smear, again->smear / out.pixels_per_unit);
       return out;
@@ -1568,9 +1573,10 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     out.margin = again->margin;
     out.noise_margin = again->noise_margin;
     out.evidence = again->evidence;
+    out.model_ink = again->ink;
     out.smear = again->smear / out.pixels_per_unit;
   }
-  out.margin = out.noise_margin = out.evidence = 0;  // the reading never settled
+  out.margin = out.noise_margin = out.evidence = out.model_ink = 0;  // the reading never settled
   return out;
 }
 
@@ -1589,7 +1595,7 @@ Stage outline_stage(const OutlineReading& r, const DetectorParams& params) {
   if (r.contrast < kMinContrast) return Stage::contrast;
   if (r.baseline_gap < kMinBaselineGap) return Stage::baselines;
   if (r.smear > kMaxSmear) return Stage::smear;  // the alignment's smear decides before the reading
-  if (r.margin < kMinMargin || r.evidence < kMinEvidence) return Stage::margin;
+  if (r.margin < kMinMargin || r.evidence < kMinEvidence || !(r.model_ink > kMinModelInk)) return Stage::margin;
   if (r.marker_correlation < kMinMarkerCorrelation) return Stage::marker;
   return Stage::detected;
 }

@@ -452,6 +452,9 @@ struct OutlineReading {
                                   // how much the fit worsens when the square moves there, over
                                   // how much the model predicts (1: the image shows the whole
                                   // difference; 0: it lies halfway), under the final alignment
+  double model_ink = 0;           // the ink (paper minus ink level) the pixel model fits to the
+                                  // whole marker of the id read, over `contrast` (least of the
+                                  // readings made)
   double baseline_gap = 0;        // how much more the two baseline corners look like baselines
                                   // than the other two (0..1 of the contrast)
   double pixels_per_unit = 0;     // along the most foreshortened direction, at the centre
@@ -518,9 +521,12 @@ constexpr double kMinBaselineGap = 0.25;
 // 0.37 (one) and 0.41 or more; the validation set's wrong ones had 0.16 at most.
 constexpr double kMinEvidence = 0.4;
 // The ink (paper minus ink level) that the pixel model fits to the whole marker must be
-// this share at least of the contrast measured between its white ring and its squares'
-// cores, or the reading has no margin: squares at the positions read that explain the
-// grey levels only with a faint print explain something else. A round share, not tuned.
+// more than this share of the contrast measured between its white ring and its squares'
+// cores (OutlineReading::model_ink): squares at the positions read that explain the grey
+// levels only with a faint print explain something else. A round share, not tuned. The
+// margin check nearly implies it: a square moved one unit changes 6 of a cell's 25 unit
+// areas, so a sharp reading's margin is at most 0.24 x model_ink squared, and a margin of
+// kMinMargin needs a model ink of 0.35; blur lowers the margin further.
 constexpr double kMinModelInk = 0.4;
 constexpr double kMaxSmear = 5;  // units: a motion blur must leave a unit of the cells' 6-unit pitch unsmeared
 // The first check `reading` fails (Stage::detected when it passes them all), and whether

@@ -84,6 +84,7 @@ nlohmann::json outline_json(const OutlineVerdict& v) {
                         {"margin", v.margin},
                         {"noise_margin", v.noise_margin},
                         {"evidence", v.evidence},
+                        {"model_ink", v.model_ink},
                         {"pixels_per_unit", v.pixels_per_unit},
                         {"smear", v.smear},
                         {"defocus", v.defocus}};

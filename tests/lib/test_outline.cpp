@@ -814,7 +814,8 @@ TEST(OutlineReading, ASquareFadedIntoThePaperIsNoEvidence) {
 // values are the ones stages.hpp and docs/detector.md give for the bound: true readings
 // align at 0.78 or more as a whole marker; wrong readings above the resolution bound had
 // margins up to 0.022; a contrast of 16 grey levels is what a defocused marker's white
-// ring keeps over its cores where its margins still mean something.
+// ring keeps over its cores where its margins still mean something; the ink the pixel
+// model fits must be 0.4 of that contrast.
 TEST(OutlineReading, EachCheckRefusesAReadingJustOutsideItsBound) {
   std::mt19937_64 rng(31);
   DetectorParams params;
@@ -830,6 +831,7 @@ TEST(OutlineReading, EachCheckRefusesAReadingJustOutsideItsBound) {
   base.contrast = std::max(base.contrast, 40.0);
   base.margin = std::max(base.margin, 0.1);
   base.evidence = std::max(base.evidence, 0.6);
+  base.model_ink = std::max(base.model_ink, 0.8);
   ASSERT_EQ(outline_stage(base, params), Stage::detected);
   struct Bound {
     double OutlineReading::*field;
@@ -842,6 +844,7 @@ TEST(OutlineReading, EachCheckRefusesAReadingJustOutsideItsBound) {
                          Bound{&OutlineReading::contrast, 17, 12, Stage::contrast, "contrast"},
                          Bound{&OutlineReading::margin, 0.032, 0.022, Stage::margin, "margin"},
                          Bound{&OutlineReading::evidence, 0.41, 0.38, Stage::margin, "evidence"},
+                         Bound{&OutlineReading::model_ink, 0.42, 0.38, Stage::margin, "model ink"},
                          Bound{&OutlineReading::baseline_gap, 0.3, 0.2, Stage::baselines, "baseline gap"}}) {
     OutlineReading r = base;
     r.*b.field = b.inside;

@@ -126,6 +126,7 @@ struct OutlineVerdict {
   double noise_margin = 0;        // the same in standard deviations of the noise
   double evidence = 0;            // least share of each cell's predicted difference
                                   // to its other positions that the image shows
+  double model_ink = 0;           // the ink the pixel model fits, over `contrast`
   double pixels_per_unit = 0;     // along the most foreshortened direction
   double smear = 0;               // length of the motion blur found, units
   double defocus = 0;             // Gaussian defocus found, units (sigma)
