@@ -3,7 +3,10 @@
 // alike, so the marker is read against the paper around each pixel rather than one level.
 // The paper's level is the grey image closed (a dilation, then an erosion) by a square
 // wider than the marker's darkest features, which fills them with the paper around them
-// and keeps the edge of a shadow across the paper where it lies.
+// and keeps the edge of a shadow across the paper where it lies. Light comes from beyond
+// the marker: a dim place of that level enclosed by brighter paper is the marker's own
+// ink, widened by a blur past the square (a motion blur joins a baseline to the border's
+// corner), and is filled with the paper around it.
 #include <algorithm>
 #include <cmath>
 
@@ -14,10 +17,46 @@
 
 namespace lftag::detail {
 
-cv::Mat1b paper_level(const cv::Mat& grey, int feature) {
-  cv::Mat1b out;
-  cv::morphologyEx(grey, out, cv::MORPH_CLOSE, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(feature, feature)));
+namespace {
+
+// `level` with its basins filled: every place raised to the highest level at which a path
+// of places no darker leads to the edge of the image (a grey-level reconstruction by
+// erosion, by raster and anti-raster scans until nothing changes).
+cv::Mat1b fill_basins(const cv::Mat1b& level) {
+  const int w = level.cols, h = level.rows;
+  cv::Mat1b out(level.size(), 255);
+  level.row(0).copyTo(out.row(0));
+  level.row(h - 1).copyTo(out.row(h - 1));
+  level.col(0).copyTo(out.col(0));
+  level.col(w - 1).copyTo(out.col(w - 1));
+  // One scan: each place lowered to its already scanned neighbours' least, never below
+  // its own level.
+  const auto scan = [&](int step) {
+    bool changed = false;
+    const int y0 = step > 0 ? 1 : h - 2, y1 = step > 0 ? h - 1 : 0;
+    const int x0 = step > 0 ? 1 : w - 2, x1 = step > 0 ? w - 1 : 0;
+    for (int y = y0; y != y1; y += step)
+      for (int x = x0; x != x1; x += step) {
+        const std::uint8_t before =
+            std::min({out(y - step, x - 1), out(y - step, x), out(y - step, x + 1), out(y, x - step)});
+        const std::uint8_t v = std::max(level(y, x), std::min(out(y, x), before));
+        if (v != out(y, x)) out(y, x) = v, changed = true;
+      }
+    return changed;
+  };
+  if (w > 2 && h > 2)
+    while (scan(1) | scan(-1)) {
+    }
   return out;
+}
+
+}  // namespace
+
+cv::Mat1b paper_level(const cv::Mat& grey, int feature) {
+  cv::Mat1b closed;
+  cv::morphologyEx(grey, closed, cv::MORPH_CLOSE,
+                   cv::getStructuringElement(cv::MORPH_RECT, cv::Size(feature, feature)));
+  return fill_basins(closed);
 }
 
 std::optional<EvenLight> even_light(const ImageView& image, const std::array<cv::Point2d, 4>& outline,

@@ -346,7 +346,8 @@ void binarise_patch(const Patch& patch, BinaryImage& out);
 
 // ---------------------------------------------------------------- shading.cpp
 // The paper's level under each pixel of `grey`: its levels closed (a dilation, then an
-// erosion) by a square of `feature` px, wider than its darkest features.
+// erosion) by a square of `feature` px, wider than its darkest features, and then every
+// basin of that level filled (no shadow lies wholly inside a marker).
 cv::Mat1b paper_level(const cv::Mat& grey, int feature);
 
 // The neighbourhood of a marker's outline with the light taken out: each pixel over the

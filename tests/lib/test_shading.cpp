@@ -43,6 +43,16 @@ TEST(PaperLevel, FillsTheDarkFeaturesAndKeepsAShadowsEdge) {
   for (int x = 0; x < 120; ++x) EXPECT_EQ(paper(24, x), x < 60 ? 200 : 90) << x;
 }
 
+TEST(PaperLevel, FillsAFeatureWiderThanTheClosingThatPaperEncloses) {
+  // A 20 px square is wider than the closing's 11 px: closed, it stays dark, but paper
+  // encloses it, so no light reaches it that does not reach the paper around it.
+  cv::Mat1b grey(60, 120, std::uint8_t(200));
+  grey(cv::Rect(30, 20, 20, 20)).setTo(10);
+  grey(cv::Rect(90, 0, 30, 60)) *= 0.45;  // a shadow from the edge on stays
+  const cv::Mat1b paper = detail::paper_level(grey, 11);
+  for (int x = 0; x < 120; ++x) EXPECT_EQ(paper(30, x), x < 90 ? 200 : 90) << x;
+}
+
 TEST(EvenLight, NoneWhereTheLightIsEven) {
   EXPECT_FALSE(detail::even_light(ImageView(lit_marker().image), lit_marker().outline, Family(3)));
   // A gentle gradient across the marker: 6 %, under kMinPaperSpread's 20 %.
@@ -66,6 +76,16 @@ TEST(EvenLight, TakesAShadowOut) {
   EXPECT_NEAR(at(200, 40 + 27), 200, 6);  // shadowed ring
   EXPECT_NEAR(at(100, 40 + 9), 20, 4);    // lit border
   EXPECT_NEAR(at(200, 40 + 9), 20, 6);    // shadowed border
+}
+
+TEST(EvenLight, NoneForAMarkerSmearedByMotion) {
+  // Smeared along a diagonal by 6 units, a baseline joins the border's corner in a dark
+  // patch wider than the closing (the dimmest tenth of the ring was at 0.71 of its
+  // brightest, closed alone): the marker's own ink, not light.
+  Lit smeared = lit_marker();
+  cv::filter2D(smeared.image, smeared.image, -1, motion_blur_kernel(54, 45), cv::Point(-1, -1), 0,
+               cv::BORDER_REPLICATE);
+  EXPECT_FALSE(detail::even_light(ImageView(smeared.image), smeared.outline, Family(3)));
 }
 
 TEST(EvenLight, NoneForAMarkerWithNoPaperBetweenItsSquares) {
