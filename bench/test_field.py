@@ -29,7 +29,7 @@ MEASURED = {
     "lftag-3x3": {
         "plain": (40, 40),
         "shadow": (35, 15),
-        "motion": (29, 31),
+        "motion": (34, 34),
         "pillbox": (40, 40),
         "barrel": (40, 40),
         "low-light": (40, 40),
@@ -44,7 +44,7 @@ MEASURED = {
     "lftag-4x4": {
         "plain": (40, 40),
         "shadow": (36, 12),
-        "motion": (21, 26),
+        "motion": (30, 33),
         "pillbox": (40, 40),
         "barrel": (40, 40),
         "low-light": (40, 40),
@@ -59,7 +59,7 @@ MEASURED = {
     "lftag-6x6": {
         "plain": (40, 40),
         "shadow": (24, 8),
-        "motion": (10, 21),
+        "motion": (19, 24),
         "pillbox": (40, 40),
         "barrel": (40, 40),
         "low-light": (36, 37),

@@ -557,7 +557,6 @@ const char* stage_name(Stage stage) {
     case Stage::margin: return "margin";
     case Stage::ink: return "ink";
     case Stage::marker: return "marker";
-    case Stage::smear: return "smear";
     case Stage::unexpected: return "unexpected";
     case Stage::pose: return "pose";
     case Stage::duplicate: return "duplicate";

@@ -1281,7 +1281,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       std::vector<SparseTemplate> drawn;
       const cv::Mat1f blurred = blurred_template(sharp_structure(family), 0.5);
       std::vector<double> lengths;  // template pixels
-      for (double units = 1.5; units <= kMaxSmear + 1; units += 1.5) lengths.push_back(units * kTemplateScale);
+      for (double units = 1.5; units <= kLongestSmearSought; units += 1.5) lengths.push_back(units * kTemplateScale);
       for (int a = 0; a < 8; ++a)
         for (SparseTemplate& t :
              SparseTemplate::smeared(blurred, 3, {std::cos(a * CV_PI / 8), std::sin(a * CV_PI / 8)}, lengths))
@@ -1336,7 +1336,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   const auto template_smear = [&](const cv::Mat& warp_to_crop, cv::Point2d along) {
     const cv::Vec2d t = jacobian_at_centre(warp_to_crop).inv() * cv::Vec2d(along.x, along.y);
     const cv::Point2d out(t[0], t[1]);
-    return cv::norm(out) <= 2 * (kMaxSmear + 1) * kTemplateScale ? out : cv::Point2d();
+    return cv::norm(out) <= 2 * kLongestSmearSought * kTemplateScale ? out : cv::Point2d();
   };
   const auto template_kernel = [&](const cv::Mat& warp_to_crop, cv::Point2d along) {
     const cv::Point2d t = template_smear(warp_to_crop, along);
@@ -1412,7 +1412,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
         best = c, best_along = along;
     };
     for (int a = 0; a < 8; ++a)
-      for (double units = 1.5; units <= kMaxSmear + 1; units += 1.5) try_smear(a * CV_PI / 8, units);
+      for (double units = 1.5; units <= kLongestSmearSought; units += 1.5) try_smear(a * CV_PI / 8, units);
     if (best_along != cv::Point2d()) {
       const double angle = std::atan2(best_along.y, best_along.x), units = cv::norm(best_along) / crop_per_unit;
       for (const double da : {-CV_PI / 16, 0.0, CV_PI / 16})
@@ -1485,14 +1485,11 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   out.baseline_gap = best_gap;
   // What the reading below cannot change decides first: it is the expensive part (each of
   // its pixel models fits 6 to 15 blurs, and a reading makes two to four). The resolution
-  // is the alignment's, and the smear the reading reports is at least
-  // PixelModel::least_smear of the alignment's: in the field experiment's tuning set most
-  // of the time of a frame under motion blur went to readings of markers blurred by more
-  // than kMaxSmear, and at 1080p to readings under min_pixels_per_unit, all refused after
-  // the reading.
+  // is the alignment's: at 1080p most of a frame's time went to readings under
+  // min_pixels_per_unit, all refused after the reading.
   out.smear = PixelModel::least_smear(smear) / out.pixels_per_unit;
   if (out.pixels_per_unit < min_pixels_per_unit || out.correlation < kMinCorrelation || out.contrast < kMinContrast ||
-      out.baseline_gap < kMinBaselineGap || out.smear > kMaxSmear)
+      out.baseline_gap < kMinBaselineGap)
     return out;  // margin and marker correlation 0: not acceptable
   if (read_places) {
     std::array<cv::Point2d, 4> corners;
@@ -1594,7 +1591,6 @@ Stage outline_stage(const OutlineReading& r, const DetectorParams& params) {
   if (r.correlation < kMinCorrelation) return Stage::structure;
   if (r.contrast < kMinContrast) return Stage::contrast;
   if (r.baseline_gap < kMinBaselineGap) return Stage::baselines;
-  if (r.smear > kMaxSmear) return Stage::smear;  // the alignment's smear decides before the reading
   if (r.margin < kMinMargin || r.evidence < kMinEvidence || !(r.model_ink > kMinModelInk)) return Stage::margin;
   if (r.marker_correlation < kMinMarkerCorrelation) return Stage::marker;
   return Stage::detected;

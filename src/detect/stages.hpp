@@ -529,7 +529,12 @@ constexpr double kMinEvidence = 0.4;
 // areas, so a sharp reading's margin is at most 0.24 x model_ink squared, and a margin of
 // kMinMargin needs a model ink of 0.35; blur lowers the margin further.
 constexpr double kMinModelInk = 0.4;
-constexpr double kMaxSmear = 5;  // units: a motion blur must leave a unit of the cells' 6-unit pitch unsmeared
+// The longest motion blur the alignment tries, units (the pixel model fits lengths up to
+// 16 % either side of the one found). A blur near the cells' 6-unit pitch leaves little of
+// a square's one-unit shifts; how much is left is the evidence check's to judge, cell by
+// cell, as under any other blur (a 4x4 blurred by 5.9 units was misread when blur of over
+// 5 units was refused outright and evidence was not yet measured).
+constexpr double kLongestSmearSought = 6;
 // The first check `reading` fails (Stage::detected when it passes them all), and whether
 // it passes them all.
 Stage outline_stage(const OutlineReading& reading, const DetectorParams& params);

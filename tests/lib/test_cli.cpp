@@ -327,9 +327,8 @@ TEST(Cli, DetectWhyListsTheOutlineReads) {
   EXPECT_EQ(o["detections"][0]["id"], 6789);
   EXPECT_TRUE(o["detections"][0]["from_outline"].get<bool>());
   ASSERT_EQ(o["outline_reads"].size(), o["stats"]["funnel"]["outline_reads"].get<std::size_t>());
-  const std::set<std::string> known = {"budget",    "deadline",   "alignment", "structure", "contrast",
-                                       "baselines", "resolution", "margin",    "marker",    "smear",
-                                       "pose",      "duplicate",  "detected"};
+  const std::set<std::string> known = {"budget",     "deadline", "alignment", "structure", "contrast",  "baselines",
+                                       "resolution", "margin",   "marker",    "pose",      "duplicate", "detected"};
   int detected = 0;
   for (const auto& c : o["outline_reads"]) {
     EXPECT_EQ(known.count(c["stage"].get<std::string>()), 1u) << c;

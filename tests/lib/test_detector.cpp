@@ -547,7 +547,7 @@ TEST(Detector, OutlineReadsAreBoundedPerFrame) {
             stats.outline_reads_skipped);
   for (const OutlineVerdict& v : trace.outline_reads) EXPECT_NE(v.stage, Stage::detected);
   EXPECT_STREQ(stage_name(Stage::alignment), "alignment");
-  EXPECT_STREQ(stage_name(Stage::smear), "smear");
+  EXPECT_STREQ(stage_name(Stage::margin), "margin");
 }
 
 TEST(Detector, StatsCountTheFunnelAndTraceRecordsTheStages) {

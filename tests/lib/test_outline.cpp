@@ -163,43 +163,70 @@ TEST(OutlineReading, ThePixelModelReadsAtTheResolutionBound) {
   }
 }
 
+namespace {
+
+// A 64 px marker of family n at 5 m (2.9 px per unit for 3x3, 2.3 for 4x4) blurred by
+// `units` of its own units at `angle` degrees, on a white margin of 6 units.
+Far smeared_marker(int n, TagId id, double units, double angle) {
+  SceneParams p;
+  p.camera = paper_camera();
+  p.blur_length_px = units * 64.0 / Family(n).side();
+  p.blur_angle_deg = angle;
+  SceneMarker m;
+  m.family = Family(n);
+  m.id = id;
+  m.margin_units = 6;
+  m.tvec = {0.01, -0.02, 5.0};
+  Far far{render_scene(p, {m}), {}};
+  for (int i = 0; i < 4; ++i) far.corners[i] = far.scene.truth[0].corners[i];
+  return far;
+}
+
+}  // namespace
+
 TEST(OutlineReading, FindsTheLengthOfAMotionBlur) {
-  // 64 px 3x3 markers (5 m) blurred by 4.8 units in several directions: the structure is
-  // aligned smeared in the direction and by the length that correlate best, and the cells
-  // are read with the blur's length fitted. 7 units (longer than the cell pitch less one unit) is
-  // refused; nothing is ever misread.
+  // 64 px 3x3 and 4x4 markers blurred by 4.8 units in several directions: the structure
+  // is aligned smeared in the direction and by the length that correlate best, and the
+  // cells are read with the blur's length fitted.
   std::mt19937_64 rng(16);
   DetectorParams params;
-  const double unit = 64.0 / Family(3).side();
-  for (const double angle : {0.0, 30.0, 60.0, 90.0}) {
-    for (const double units : {4.8, 7.0}) {
-      const TagId id = random_id(Family(3), rng);
-      SceneParams p;
-      p.camera = paper_camera();
-      p.blur_length_px = units * unit;
-      p.blur_angle_deg = angle;
-      SceneMarker m;
-      m.family = Family(3);
-      m.id = id;
-      m.margin_units = 6;
-      m.tvec = {0.01, -0.02, 5.0};
-      const RenderedScene scene = render_scene(p, {m});
-      std::array<cv::Point2d, 4> corners;
-      for (int i = 0; i < 4; ++i) corners[i] = scene.truth[0].corners[i];
-      const auto reading = read_outline(ImageView(scene.image), coarse(corners, 0, 1.0, rng), Family(3));
-      const bool accepted = reading && acceptable(*reading, params);
-      if (accepted) {
-        EXPECT_EQ(reading->id, id) << angle << " deg, " << units << " units";
-      }
-      if (units < kMaxSmear) {
-        EXPECT_TRUE(accepted) << angle << " deg";
-        if (reading) {
-          EXPECT_NEAR(reading->smear, units, 0.8) << angle << " deg";
-        }
-      } else {
-        EXPECT_FALSE(accepted) << angle << " deg";
-      }
+  const double units = 4.8;
+  for (const int n : {3, 4})
+    for (const double angle : {0.0, 30.0, 60.0, 90.0}) {
+      const TagId id = random_id(Family(n), rng);
+      const Far far = smeared_marker(n, id, units, angle);
+      const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, 0, 1.0, rng), Family(n));
+      const std::string what = std::to_string(n) + "x" + std::to_string(n) + ", " + std::to_string(angle) + " deg";
+      ASSERT_TRUE(reading) << what;
+      EXPECT_TRUE(acceptable(*reading, params)) << what << ": evidence " << reading->evidence;
+      EXPECT_EQ(reading->id, id) << what;
+      EXPECT_NEAR(reading->smear, units, 0.8) << what;
     }
+}
+
+TEST(OutlineReading, BlursAsLongAsTheCellPitchAreReadOrRefusedNeverMisread) {
+  // A blur as long as the cells' 6-unit pitch leaves a square's one-unit shift visible in
+  // most directions and cells, not in all: there the fit can move a square to its
+  // neighbour's position (a 3x3 blurred vertically read so, as another id), and that cell shows
+  // too little of the difference its digit makes (the evidence check refuses it). Beyond
+  // the lengths the alignment tries (6 units) some markers still align and show every
+  // digit (the pixel model fits lengths 16 % beyond the one found); the others fail the
+  // structure. No motion blur bound decides: 6 to 8 units read 9 of 24 3x3 and 9 of 24
+  // 4x4 markers, every one right.
+  std::mt19937_64 rng(17);
+  DetectorParams params;
+  for (const int n : {3, 4}) {
+    int read = 0;
+    for (const double units : {6.0, 6.5, 7.0, 8.0})
+      for (const double angle : {0.0, 30.0, 45.0, 60.0, 90.0, 120.0}) {
+        const TagId id = random_id(Family(n), rng);
+        const Far far = smeared_marker(n, id, units, angle);
+        const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, 0, 1.0, rng), Family(n));
+        if (!reading || !acceptable(*reading, params)) continue;
+        ++read;
+        EXPECT_EQ(reading->id, id) << n << "x" << n << ", " << angle << " deg, " << units << " units";
+      }
+    EXPECT_GE(read, 6) << n << "x" << n;
   }
 }
 
@@ -852,9 +879,4 @@ TEST(OutlineReading, EachCheckRefusesAReadingJustOutsideItsBound) {
     r.*b.field = b.outside;
     EXPECT_EQ(outline_stage(r, params), b.refused_at) << b.name << " " << b.outside;
   }
-  OutlineReading smeared = base;
-  smeared.smear = 4.8;
-  EXPECT_EQ(outline_stage(smeared, params), Stage::detected);
-  smeared.smear = 5.5;
-  EXPECT_EQ(outline_stage(smeared, params), Stage::smear);
 }

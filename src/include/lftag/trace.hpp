@@ -87,7 +87,6 @@ enum class Stage {
   margin,        // another id fitted within the decoding margin, or a digit within the noise of another
   ink,           // the squares' ink did not match the design on any side
   marker,        // outline read: the whole marker of the id read fitted under 0.75
-  smear,         // outline read: a motion blur longer than 5 units (cells look alike)
   unexpected,    // read where a marker was expected (FrameHints), as another id or family
   pose,          // no pose could be computed
   duplicate,     // a marker already found at its place
