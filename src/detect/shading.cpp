@@ -17,12 +17,10 @@
 
 namespace lftag::detail {
 
-namespace {
-
 // `level` with its basins filled: every place raised to the highest level at which a path
 // of places no darker leads to the edge of the image (a grey-level reconstruction by
 // erosion, by raster and anti-raster scans until nothing changes).
-cv::Mat1b fill_basins(const cv::Mat1b& level) {
+cv::Mat1b filled_basins(const cv::Mat1b& level) {
   const int w = level.cols, h = level.rows;
   cv::Mat1b out(level.size(), 255);
   level.row(0).copyTo(out.row(0));
@@ -50,13 +48,11 @@ cv::Mat1b fill_basins(const cv::Mat1b& level) {
   return out;
 }
 
-}  // namespace
-
 cv::Mat1b paper_level(const cv::Mat& grey, int feature) {
   cv::Mat1b closed;
   cv::morphologyEx(grey, closed, cv::MORPH_CLOSE,
                    cv::getStructuringElement(cv::MORPH_RECT, cv::Size(feature, feature)));
-  return fill_basins(closed);
+  return closed;
 }
 
 std::optional<EvenLight> even_light(const ImageView& image, const std::array<cv::Point2d, 4>& outline,
@@ -73,7 +69,7 @@ std::optional<EvenLight> even_light(const ImageView& image, const std::array<cv:
         cv::Rect(0, 0, image.width, image.height);
   if (box.width < feature || box.height < feature) return std::nullopt;
   const cv::Mat grey = image.mat()(box);
-  const cv::Mat1b paper = paper_level(grey, feature);
+  cv::Mat1b paper = paper_level(grey, feature);
   // The paper's light on the white ring, all round its middle.
   std::array<cv::Point2f, 4> from, to;
   const std::array<cv::Point2d, 4> units = family.outer_corners();
@@ -87,15 +83,26 @@ std::optional<EvenLight> even_light(const ImageView& image, const std::array<cv:
     ring.insert(ring.end(), {{t, 3}, {side - 3.0, t}, {side - t, side - 3.0}, {3, side - t}});
   }
   cv::perspectiveTransform(ring, at, h);
-  std::vector<int> light;
-  for (const cv::Point2d& p : at) {
-    const cv::Point q(cvRound(p.x), cvRound(p.y));
-    if (q.x >= 0 && q.y >= 0 && q.x < paper.cols && q.y < paper.rows) light.push_back(paper(q));
-  }
-  if (light.size() < 8) return std::nullopt;
-  std::sort(light.begin(), light.end());
-  const int dim = light[light.size() / 10], bright = light[light.size() * 9 / 10];
-  if (dim >= kMinPaperSpread * bright || bright <= 0) return std::nullopt;  // evenly lit: read it as it is
+  // The dimmest and brightest tenths of the light along the ring: none when it is even.
+  const auto uneven = [&]() -> std::optional<std::pair<int, int>> {
+    std::vector<int> light;
+    for (const cv::Point2d& p : at) {
+      const cv::Point q(cvRound(p.x), cvRound(p.y));
+      if (q.x >= 0 && q.y >= 0 && q.x < paper.cols && q.y < paper.rows) light.push_back(paper(q));
+    }
+    if (light.size() < 8) return std::nullopt;
+    std::sort(light.begin(), light.end());
+    const int dim = light[light.size() / 10], bright = light[light.size() * 9 / 10];
+    if (dim >= kMinPaperSpread * bright || bright <= 0) return std::nullopt;
+    return std::make_pair(dim, bright);
+  };
+  // Evenly lit: read it as it is. Filling the basins only raises the level, so it is
+  // done (it costs more than the closing) only where the closed level is uneven.
+  if (!uneven()) return std::nullopt;
+  paper = filled_basins(paper);
+  const std::optional<std::pair<int, int>> spread = uneven();
+  if (!spread) return std::nullopt;
+  const int bright = spread->second;
   // Each pixel over the paper under it, brought to the lit paper's level.
   EvenLight out;
   out.origin = box.tl();

@@ -346,9 +346,13 @@ void binarise_patch(const Patch& patch, BinaryImage& out);
 
 // ---------------------------------------------------------------- shading.cpp
 // The paper's level under each pixel of `grey`: its levels closed (a dilation, then an
-// erosion) by a square of `feature` px, wider than its darkest features, and then every
-// basin of that level filled (no shadow lies wholly inside a marker).
+// erosion) by a square of `feature` px, wider than its darkest features.
 cv::Mat1b paper_level(const cv::Mat& grey, int feature);
+// A paper level with every basin filled: each place raised to the highest level at which
+// a path no darker leads to the image's edge. No shadow lies wholly inside a marker, so a
+// dim place that brighter paper encloses is the marker's own ink widened by a blur past
+// the closing (a motion blur along a diagonal joins a baseline to the border's corner).
+cv::Mat1b filled_basins(const cv::Mat1b& level);
 
 // The neighbourhood of a marker's outline with the light taken out: each pixel over the
 // paper under it (paper_level, the darkest features being the 4-unit baselines), at the

@@ -43,13 +43,15 @@ TEST(PaperLevel, FillsTheDarkFeaturesAndKeepsAShadowsEdge) {
   for (int x = 0; x < 120; ++x) EXPECT_EQ(paper(24, x), x < 60 ? 200 : 90) << x;
 }
 
-TEST(PaperLevel, FillsAFeatureWiderThanTheClosingThatPaperEncloses) {
+TEST(FilledBasins, FillsAFeatureWiderThanTheClosingThatPaperEncloses) {
   // A 20 px square is wider than the closing's 11 px: closed, it stays dark, but paper
   // encloses it, so no light reaches it that does not reach the paper around it.
   cv::Mat1b grey(60, 120, std::uint8_t(200));
   grey(cv::Rect(30, 20, 20, 20)).setTo(10);
   grey(cv::Rect(90, 0, 30, 60)) *= 0.45;  // a shadow from the edge on stays
-  const cv::Mat1b paper = detail::paper_level(grey, 11);
+  const cv::Mat1b closed = detail::paper_level(grey, 11);
+  EXPECT_EQ(closed(30, 40), 10);
+  const cv::Mat1b paper = detail::filled_basins(closed);
   for (int x = 0; x < 120; ++x) EXPECT_EQ(paper(30, x), x < 90 ? 200 : 90) << x;
 }
 
