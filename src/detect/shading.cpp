@@ -21,30 +21,37 @@ namespace lftag::detail {
 // of places no darker leads to the edge of the image (a grey-level reconstruction by
 // erosion, by raster and anti-raster scans until nothing changes).
 cv::Mat1b filled_basins(const cv::Mat1b& level) {
+  if (level.empty()) return {};
   const int w = level.cols, h = level.rows;
   cv::Mat1b out(level.size(), 255);
   level.row(0).copyTo(out.row(0));
   level.row(h - 1).copyTo(out.row(h - 1));
   level.col(0).copyTo(out.col(0));
   level.col(w - 1).copyTo(out.col(w - 1));
+  if (w <= 2 || h <= 2) return out;
   // One scan: each place lowered to its already scanned neighbours' least, never below
   // its own level.
   const auto scan = [&](int step) {
     bool changed = false;
     const int y0 = step > 0 ? 1 : h - 2, y1 = step > 0 ? h - 1 : 0;
     const int x0 = step > 0 ? 1 : w - 2, x1 = step > 0 ? w - 1 : 0;
-    for (int y = y0; y != y1; y += step)
+    for (int y = y0; y != y1; y += step) {
+      const std::uint8_t* scanned = out.ptr<std::uint8_t>(y - step);
+      const std::uint8_t* own = level.ptr<std::uint8_t>(y);
+      std::uint8_t* row = out.ptr<std::uint8_t>(y);
       for (int x = x0; x != x1; x += step) {
         const std::uint8_t before =
-            std::min({out(y - step, x - 1), out(y - step, x), out(y - step, x + 1), out(y, x - step)});
-        const std::uint8_t v = std::max(level(y, x), std::min(out(y, x), before));
-        if (v != out(y, x)) out(y, x) = v, changed = true;
+            std::min(std::min(scanned[x - 1], scanned[x]), std::min(scanned[x + 1], row[x - step]));
+        const std::uint8_t v = std::max(own[x], std::min(row[x], before));
+        if (v != row[x]) row[x] = v, changed = true;
       }
+    }
     return changed;
   };
-  if (w > 2 && h > 2)
-    while (scan(1) | scan(-1)) {
-    }
+  for (bool changed = true; changed;) {
+    const bool forward = scan(1), backward = scan(-1);
+    changed = forward || backward;
+  }
   return out;
 }
 
