@@ -195,18 +195,11 @@ PaperLevel paper_under(const RegionTree& tree, int white_region, const int* kids
   // the pattern where blur leaves no pure paper between squares (on a 60 px marker
   // defocused by 1.2 px, 6 % lower beside the border than at the crossings of the gaps,
   // which pulled the outer squares' centroids 0.03 px further inwards), and by the noise.
-  const auto even = [&] {
-    const LevelHistogram closed(tree, white_region, paper.local, paper.origin);
+  const auto even = [&](const cv::Mat1b& level) {
+    const LevelHistogram closed(tree, white_region, level, paper.origin);
     return closed.quantile(0.1) >= kMinPaperSpread * closed.quantile(0.9);
   };
-  // A light that looks uneven may be the marker's own blurred ink (filled_basins); the
-  // basins are filled only then, as that costs more than the closing.
-  bool followed = !even();
-  if (followed) {
-    paper.local = filled_basins(paper.local);
-    followed = !even();
-  }
-  if (!followed) {
+  if (!light_varies(paper.local, even)) {
     paper.local.release();
     return paper;
   }

@@ -90,26 +90,22 @@ std::optional<EvenLight> even_light(const ImageView& image, const std::array<cv:
     ring.insert(ring.end(), {{t, 3}, {side - 3.0, t}, {side - t, side - 3.0}, {3, side - t}});
   }
   cv::perspectiveTransform(ring, at, h);
-  // The dimmest and brightest tenths of the light along the ring: none when it is even.
-  const auto uneven = [&]() -> std::optional<std::pair<int, int>> {
+  // Even when the ring's dimmest tenth is within kMinPaperSpread of its brightest (then
+  // the marker is read as it is); `bright` is that brightest tenth.
+  int bright = 0;
+  const auto even = [&](const cv::Mat1b& level) {
     std::vector<int> light;
     for (const cv::Point2d& p : at) {
       const cv::Point q(cvRound(p.x), cvRound(p.y));
-      if (q.x >= 0 && q.y >= 0 && q.x < paper.cols && q.y < paper.rows) light.push_back(paper(q));
+      if (q.x >= 0 && q.y >= 0 && q.x < level.cols && q.y < level.rows) light.push_back(level(q));
     }
-    if (light.size() < 8) return std::nullopt;
+    if (light.size() < 8) return true;
     std::sort(light.begin(), light.end());
-    const int dim = light[light.size() / 10], bright = light[light.size() * 9 / 10];
-    if (dim >= kMinPaperSpread * bright || bright <= 0) return std::nullopt;
-    return std::make_pair(dim, bright);
+    const int dim = light[light.size() / 10];
+    bright = light[light.size() * 9 / 10];
+    return dim >= kMinPaperSpread * bright || bright <= 0;
   };
-  // Evenly lit: read it as it is. Filling the basins only raises the level, so it is
-  // done (it costs more than the closing) only where the closed level is uneven.
-  if (!uneven()) return std::nullopt;
-  paper = filled_basins(paper);
-  const std::optional<std::pair<int, int>> spread = uneven();
-  if (!spread) return std::nullopt;
-  const int bright = spread->second;
+  if (!light_varies(paper, even)) return std::nullopt;
   // Each pixel over the paper under it, brought to the lit paper's level.
   EvenLight out;
   out.origin = box.tl();

@@ -353,6 +353,16 @@ cv::Mat1b paper_level(const cv::Mat& grey, int feature);
 // dim place that brighter paper encloses is the marker's own ink widened by a blur past
 // the closing (a motion blur along a diagonal joins a baseline to the border's corner).
 cv::Mat1b filled_basins(const cv::Mat1b& level);
+// Whether the light under a closed paper level varies, as `even` (a level -> bool)
+// judges it: a level that looks uneven has its basins filled (`paper` is left so) and is
+// judged again. Filling only raises a level and costs more than the closing, so an even
+// level is not filled.
+template <class Even>
+bool light_varies(cv::Mat1b& paper, const Even& even) {
+  if (even(paper)) return false;
+  paper = filled_basins(paper);
+  return !even(paper);
+}
 
 // The neighbourhood of a marker's outline with the light taken out: each pixel over the
 // paper under it (paper_level, the darkest features being the 4-unit baselines), at the
