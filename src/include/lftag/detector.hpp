@@ -140,7 +140,10 @@ struct DetectorParams {
   // many standard deviations of the blobs' scatter from reading as another digit
   // (Detection::noise_margin): every digit pattern is an id, so a guessed cell is a wrong
   // id. In the field experiment (docs/BENCHMARKS.md) the wrong ids of flat markers read
-  // by their blobs had 1.2 to 2.0, and 0.6 % of the right readings were under 2. Outline
+  // by their blobs had 1.2 to 2.0, and 0.6 % of the right readings were under 2. From 4x4
+  // the same margin is kept from each reading that moves a band of rows or columns one
+  // unit, under a grid free to bow (a bent sheet's 4x4 was read so, at 3.4 on its
+  // digits; under the bow 0). Outline
   // readings report their noise margin but are not held to it: there the residual is
   // mostly the model's misfit, and right readings of blurred markers have 0.7 to 1.4.
   double min_noise_margin = 2.0;
@@ -210,7 +213,8 @@ struct Detection {
   // How sure the id is: how many standard deviations of the noise measured on this marker
   // its least certain data cell stands from reading as another digit (every digit pattern
   // is an id, so one cell read wrong is another marker's id). From the blobs' scatter about
-  // the fitted grid (at least DetectorParams::min_noise_margin), or for an outline reading
+  // the fitted grid (at least DetectorParams::min_noise_margin; from 4x4 also each band of
+  // rows or columns from its one-unit shift, under a grid free to bow), or for an outline reading
   // the grey levels' residual about the fitted marker, correlated between neighbours as
   // it is (that residual is mostly misfit: right readings of blurred markers show 0.7 to
   // 1.4). 0 for 2x2 (its four blobs fit exactly; its grey levels decide).
