@@ -17,6 +17,7 @@
 #include <map>
 #include <mutex>
 #include <numeric>
+#include <stdexcept>
 #include <tuple>
 
 #include <opencv2/calib3d.hpp>
@@ -847,10 +848,13 @@ std::vector<Clip> plan_clips(const Options& options, const Sources& sources, int
   return clips;
 }
 
-// Marker `slot` of every clip of `set` for `system`: each set its own ids.
+// Marker `slot` of every clip of `set` for `system`: each set its own ids, kIdsPerSet of
+// them, or half of a smaller dictionary's (AprilTag 16h5 and LFTag 2x2 have 30 and 16).
 std::vector<std::string> set_ids(const FiducialSystem& system, int set, std::uint64_t seed) {
   const std::vector<std::string> all = system.marker_ids(2 * kIdsPerSet, seed);
-  return {all.begin() + set * kIdsPerSet, all.begin() + (set + 1) * kIdsPerSet};
+  const std::ptrdiff_t per_set = std::ptrdiff_t(all.size() / 2);
+  if (per_set == 0) throw std::runtime_error(system.name() + ": too few ids for a tuning and a validation set");
+  return {all.begin() + set * per_set, all.begin() + (set + 1) * per_set};
 }
 
 class FieldClips final : public ClipSource {

@@ -177,6 +177,19 @@ def main(bench, plot, work):
             fail(f"tables.py: no {section} table with {SYSTEMS[0]} in it")
     if "### Adversarial frames" not in run.stdout or "white-4-10px" not in run.stdout:
         fail("tables.py: no Adversarial frames table")
+
+    # The field experiment gives each set its own ids: the dictionaries smaller than its two
+    # sets' 60 ids (AprilTag 16h5: 30, LFTag 2x2: 16) are split in halves.
+    small = work / "small-dictionaries"
+    run = subprocess.run([bench, "field", "--quick", "--conditions", "plain", "--systems",
+                          "apriltag-16h5-d2,lftag-2x2", "--out", str(small)])
+    if run.returncode != 0:
+        fail(f"lftag-bench field with the smallest dictionaries exited with {run.returncode}")
+    with open(small / "field_summary.csv", newline="") as f:
+        sets = {(r["system"], r["set"]) for r in csv.DictReader(f)}
+    for system in ("apriltag-16h5-d2", "lftag-2x2"):
+        if {(system, "tuning"), (system, "validation")} - sets:
+            fail(f"field: {system} lacks a set")
     print("bench quick run: all results, plots and tables written")
 
 
