@@ -69,6 +69,7 @@ std::vector<std::pair<std::string, double>> LftagSystem::counters() const {
           {"residual", double(s.residual)},
           {"unambiguous", double(s.unambiguous)},
           {"decoded", double(s.decoded)},
+          {"bowed", double(s.bowed)},
           {"second_looks", double(s.second_looks)},
           {"second_look_found", double(s.second_look_found)},
           {"outline_reads", double(s.outline_reads)},

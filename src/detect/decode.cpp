@@ -416,44 +416,81 @@ double digit_noise_margin(const Candidate& c, const CellCentres& design, const D
 // A sheet bent round a cylinder moves its squares smoothly, and a band of rows (or
 // columns) away from the middle can land a whole unit from where a flat marker would put
 // it: read flat, that is the band shifted, another id (a 4x4 on a 0.15 to 0.4 m cylinder
-// in the field experiment was read so for three frames). So a reading must also stand
-// clear of each rival that moves a band of rows or columns one unit, under a grid free to
-// bow: a quadratic map of the unit coordinates (12 parameters). The margin is measured as
-// a digit's is: half the root of how much worse the rival fits, over the scatter about
-// the bowed grid (at least 0.02 px). A band moves only when all its squares can move the
-// same way, and rows holding a baseline cannot. Below 4x4 a bow fits any one row's shift
-// (three rows), so no reading could pass: there the margin is not measured (infinity).
-double band_noise_margin(const Candidate& c, const CellCentres& design, const Decoding& d) {
+// in the field experiment was read so for three frames), or no id at all. A grid free to
+// bow models it: the reading's homography h plus a quadratic map of unit offsets b(u),
+// seen through h, so a square at u lies at h(u) + J_h(u) b(u), linear in b's 12
+// coefficients. With the homography's 8 parameters, 14 are fitted (b's constant and
+// linear terms move h's affine part). Below 4x4 a bow fits any one row's shift (three
+// rows): bowed grids are for 4x4 and larger.
+constexpr int kBowedParameters = 14;
+
+struct Bow {
+  cv::Matx33d h;
+  cv::Mat coefficients;  // 12 x 1: b's x terms, then its y terms
+  double misfit = 0;     // squared pixels, over the blobs fitted
+};
+
+std::array<double, 6> bow_terms(const Family& f, cv::Point2d u) {
+  const double x = u.x / f.side() - 0.5, y = u.y / f.side() - 0.5;
+  return {1, x, y, x * x, x * y, y * y};
+}
+
+// The bow under h that puts the squares at `units` (grid order) nearest their blobs.
+Bow fit_bow(const Candidate& c, const cv::Matx33d& h, const std::vector<int>& blob_of_cell,
+            const std::vector<cv::Point2d>& units) {
+  const int cells = c.family.cell_count();
+  cv::Mat terms(2 * cells, 12, CV_64F, 0.0), offsets(2 * cells, 1, CV_64F);
+  for (int g = 0; g < cells; ++g) {
+    const std::array<double, 6> t = bow_terms(c.family, units[g]);
+    const cv::Matx22d j = units_to_pixels(h, units[g]);
+    const cv::Point2d off = c.blobs[blob_of_cell[g]].point - apply(h, units[g]);
+    for (int k = 0; k < 6; ++k)
+      for (int r = 0; r < 2; ++r) {
+        terms.at<double>(2 * g + r, k) = j(r, 0) * t[k];
+        terms.at<double>(2 * g + r, 6 + k) = j(r, 1) * t[k];
+      }
+    offsets.at<double>(2 * g, 0) = off.x, offsets.at<double>(2 * g + 1, 0) = off.y;
+  }
+  Bow bow;
+  bow.h = h;
+  cv::solve(terms, offsets, bow.coefficients, cv::DECOMP_QR);
+  const cv::Mat error = terms * bow.coefficients - offsets;
+  bow.misfit = error.dot(error);
+  return bow;
+}
+
+cv::Point2d bowed(const Family& f, const Bow& bow, cv::Point2d u) {
+  const std::array<double, 6> t = bow_terms(f, u);
+  cv::Vec2d b(0, 0);
+  for (int k = 0; k < 6; ++k) b += cv::Vec2d(bow.coefficients.at<double>(k), bow.coefficients.at<double>(6 + k)) * t[k];
+  const cv::Vec2d p = units_to_pixels(bow.h, u) * b;
+  return apply(bow.h, u) + cv::Point2d(p[0], p[1]);
+}
+
+std::vector<cv::Point2d> units_of(const Family& f, const CellCentres& design, TagId id) {
+  std::vector<cv::Point2d> units(f.cell_count());
+  for (int g = 0; g < f.cell_count(); ++g) units[g] = design[g][f.is_baseline(g) ? 0 : id.digit(f.data_index(g))];
+  return units;
+}
+
+// How surely the bowed grid tells reading `d` from its rivals: the least, over the readings
+// that move a band of rows or columns one unit (and with `digits`, over those that move one
+// square), of half the root of how much worse the rival fits, refitted, over the scatter
+// about the bowed grid (at least 0.02 px): a digit's margin, measured with the bow refitted
+// for each rival so that it cannot take up the square's own error. A band moves only when
+// all its squares can move the same way; rows holding a baseline cannot. Infinity below 4x4.
+double bowed_noise_margin(const Candidate& c, const CellCentres& design, const Decoding& d, bool digits) {
   const Family& f = c.family;
-  // The homography's 8 parameters and the bow's 6 quadratic terms (its constant and linear
-  // ones move the homography's affine part).
-  const int n = f.n(), cells = f.cell_count(), freedom = 2 * cells - 14;
+  const int n = f.n(), freedom = 2 * f.cell_count() - kBowedParameters;
   if (n < 4 || freedom <= 0) return std::numeric_limits<double>::infinity();
-  std::vector<cv::Point2d> units(cells);
-  for (int g = 0; g < cells; ++g) units[g] = design[g][f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g))];
-  // The bow is a quadratic map of unit offsets d(u), seen through the reading's homography:
-  // blob = H(u) + J_H(u) d(u), linear in d's 12 coefficients; the squared misfit in pixels.
-  const double scale = 1.0 / f.side();
-  auto misfit = [&](const std::vector<cv::Point2d>& at) {
-    cv::Mat terms(2 * cells, 12, CV_64F, 0.0), observed(2 * cells, 1, CV_64F), bow;
-    for (int g = 0; g < cells; ++g) {
-      const double u = at[g].x * scale - 0.5, v = at[g].y * scale - 0.5;
-      const double basis[6] = {1, u, v, u * u, u * v, v * v};
-      const cv::Matx22d j = units_to_pixels(d.homography, at[g]);
-      const cv::Point2d off = c.blobs[d.blob_of_cell[g]].point - apply(d.homography, at[g]);
-      for (int k = 0; k < 6; ++k)
-        for (int r = 0; r < 2; ++r) {
-          terms.at<double>(2 * g + r, k) = j(r, 0) * basis[k];
-          terms.at<double>(2 * g + r, 6 + k) = j(r, 1) * basis[k];
-        }
-      observed.at<double>(2 * g, 0) = off.x, observed.at<double>(2 * g + 1, 0) = off.y;
-    }
-    cv::solve(terms, observed, bow, cv::DECOMP_QR);
-    const cv::Mat error = terms * bow - observed;
-    return error.dot(error);
-  };
-  const double own = misfit(units), spread = std::max(std::sqrt(own / freedom), 0.02);
+  const std::vector<cv::Point2d> units = units_of(f, design, d.id);
+  const double own = fit_bow(c, d.homography, d.blob_of_cell, units).misfit;
+  const double spread = std::max(std::sqrt(own / freedom), 0.02);
   double least = std::numeric_limits<double>::infinity();
+  const auto consider = [&](const std::vector<cv::Point2d>& rival) {
+    const double worse = fit_bow(c, d.homography, d.blob_of_cell, rival).misfit - own;
+    least = std::min(least, std::sqrt(std::max(worse, 0.0)) / (2 * spread));
+  };
   // Bands of rows (along y, bit 0) and of columns (along x, bit 1): lines [first, last].
   for (const bool rows : {true, false}) {
     const int bit = rows ? 1 : 2;
@@ -473,11 +510,54 @@ double band_noise_margin(const Candidate& c, const CellCentres& design, const De
       std::vector<cv::Point2d> rival = units;
       for (int last = first; last < n && movable(last) == way; ++last) {
         for (int a = 0; a < n; ++a) (rows ? rival[cell(last, a)].y : rival[cell(last, a)].x) += way == 1 ? 1 : -1;
-        least = std::min(least, std::sqrt(std::max(misfit(rival) - own, 0.0)) / (2 * spread));
+        consider(rival);
       }
     }
   }
+  if (digits)
+    for (int g = 0; g < f.cell_count(); ++g) {
+      if (f.is_baseline(g)) continue;
+      const int digit = d.id.digit(f.data_index(g));
+      for (int v = 0; v < 4; ++v) {
+        if (v == digit) continue;
+        std::vector<cv::Point2d> rival = units;
+        rival[g] = design[g][v];
+        consider(rival);
+      }
+    }
   return least;
+}
+
+// Reading `d` again on a bowed grid: from its id, each data square takes the position
+// nearest its blob under the bow fitted to the id, until the id holds (three rounds at
+// most). Fills the id, worst_cell (units) and returns the bow's misfit; none when the id
+// never settled.
+std::optional<double> read_bowed(const Candidate& c, const CellCentres& design, Decoding& d) {
+  const Family& f = c.family;
+  for (int round = 0; round < 3; ++round) {
+    const Bow bow = fit_bow(c, d.homography, d.blob_of_cell, units_of(f, design, d.id));
+    TagId id;
+    double worst = 0;
+    for (int g = 0; g < f.cell_count(); ++g) {
+      if (f.is_baseline(g)) continue;
+      const cv::Point2d blob = c.blobs[d.blob_of_cell[g]].point;
+      double nearest = std::numeric_limits<double>::max();
+      int digit = 0;
+      cv::Point2d off;
+      for (int v = 0; v < 4; ++v) {
+        const cv::Point2d e = blob - bowed(f, bow, design[g][v]);
+        if (e.dot(e) < nearest) nearest = e.dot(e), digit = v, off = e;
+      }
+      id = id.with_digit(f.data_index(g), digit);
+      worst = std::max(worst, cv::norm(pixels_to_units(d.homography, design[g][digit]) * cv::Vec2d(off.x, off.y)));
+    }
+    if (id == d.id) {
+      d.worst_cell = worst;
+      return bow.misfit;
+    }
+    d.id = id;
+  }
+  return std::nullopt;
 }
 
 // The homography through all n^2 blobs at their decoded positions.
@@ -621,6 +701,66 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     return a.error != b.error ? a.error < b.error : a.edge_score > b.edge_score;
   };
 
+  // A 4x4 or larger refused flat for where its squares lie (cell residual, tau3, a rival
+  // id or digit too close) is read again on a bowed grid: each hypothesis of a plausible
+  // turn (resolved, its ink even) re-reads its squares under its own bow, and the least
+  // misfit wins. It is held to the same bounds, with the bowed grid's scatter as the
+  // noise: its cells within max_cell_residual, every other hypothesis' id and every
+  // reading that moves one square or a band of them at least min_noise_margin worse
+  // (each rival's bow refitted), tau3 on its bowed misfit, its ink even. A flat marker
+  // fits its bow with no curve, and is read so only when its own scatter allows it.
+  const auto read_on_bowed_grid = [&]() -> std::optional<Decoding> {
+    const int freedom = 2 * f.cell_count() - kBowedParameters;
+    if (f.n() < 4 || freedom <= 0) return std::nullopt;
+    struct Bowed {
+      Decoding d;
+      double misfit;
+    };
+    std::vector<Bowed> bowed_readings;
+    for (const Reading& r : readings) {
+      if (!r.resolved || !(r.d.ink_spread <= params.max_ink_spread)) continue;
+      const bool seen = std::any_of(bowed_readings.begin(), bowed_readings.end(), [&](const Bowed& b) {
+        return b.d.blob_of_cell == r.d.blob_of_cell && b.d.homography == r.d.homography;
+      });
+      if (seen) continue;
+      Decoding d = r.d;
+      if (const auto misfit = read_bowed(c, design, d)) bowed_readings.push_back({d, *misfit});
+    }
+    if (bowed_readings.empty()) return std::nullopt;
+    Bowed best = *std::min_element(bowed_readings.begin(), bowed_readings.end(),
+                                   [](const Bowed& a, const Bowed& b) { return a.misfit < b.misfit; });
+    if (best.d.worst_cell > params.max_cell_residual) return std::nullopt;
+    const double spread = std::max(std::sqrt(best.misfit / freedom), 0.02);
+    for (const Bowed& other : bowed_readings)
+      if (other.d.id != best.d.id &&
+          std::sqrt(std::max(other.misfit - best.misfit, 0.0)) / (2 * spread) < params.min_noise_margin)
+        return std::nullopt;
+    const auto h = refit(c, design, best.d);
+    if (!h || !maps_marker(f, *h)) return std::nullopt;
+    Decoding& d = best.d;
+    d.homography = *h;
+    if (smallest_scale(d.homography, middle) < params.min_pixels_per_unit) return std::nullopt;
+    d.ink_spread = square_ink_spread(c, d);
+    if (!(d.ink_spread <= params.max_ink_spread)) return std::nullopt;
+    d.noise_margin = bowed_noise_margin(c, design, d, true);
+    if (d.noise_margin < params.min_noise_margin) return std::nullopt;
+    d.edge_score = edge_gradient(image, camera, d.homography, 2, side - 2);
+    if (!(d.edge_score > 0)) return std::nullopt;
+    d.error = best.misfit / norm / d.edge_score;
+    if (d.error > params.decode_threshold(f)) return std::nullopt;
+    d.verdict = Verdict::accepted;
+    return d;
+  };
+  const auto refused = [&](Decoding flat) {
+    if (flat.verdict != Verdict::residual && flat.verdict != Verdict::margin) return flat;
+    const auto start = std::chrono::steady_clock::now();
+    const std::optional<Decoding> d = read_on_bowed_grid();
+    stats.decode_ms += elapsed_ms(start);
+    if (!d) return flat;
+    ++stats.bowed;
+    return *d;
+  };
+
   // 2x2 with tau3 at 0 (the default): a reading is accepted only when no grey level that
   // must be white is as dark as one that must be black, and the brightest edge among such
   // readings wins. Only they need the edge gradient.
@@ -644,10 +784,10 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   // Rejected whichever reading the grey levels would make best: the verdict names the
   // first check that no reading passed.
   if (passing == 0)
-    return rejected(resolved == 0                 ? Verdict::resolution
-                    : placed == 0                 ? Verdict::residual
-                    : !zero.empty() && zeros == 0 ? Verdict::residual  // 2x2: tau3
-                                                  : Verdict::ink);
+    return refused(rejected(resolved == 0                 ? Verdict::resolution
+                            : placed == 0                 ? Verdict::residual
+                            : !zero.empty() && zeros == 0 ? Verdict::residual  // 2x2: tau3
+                                                          : Verdict::ink));
 
   // Then the grey levels: the gradient along the projected inner border edge, and the
   // decoding error of each hypothesis (2x2: of those free of misordered pairs, error 0).
@@ -686,21 +826,21 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   // tau3, and every digit clear of the midpoint between two positions.
   if (best.error > params.decode_threshold(f) || best.worst_cell > params.max_cell_residual) {
     best.verdict = Verdict::residual;
-    return best;
+    return refused(best);
   }
   // Another id that fits almost as well makes the reading a guess (never, for a 2x2
   // reading free of misordered pairs: no error is below twice zero).
   for (const Decoding& d : tried)
     if (d.id != best.id && d.error < params.min_decode_margin * best.error) {
       best.verdict = Verdict::margin;
-      return best;
+      return refused(best);
     }
   // And the least certain digit clear of the noise (every digit pattern is an id).
   if (f.n() > 2) {
-    best.noise_margin = std::min(digit_noise_margin(c, design, best), band_noise_margin(c, design, best));
+    best.noise_margin = std::min(digit_noise_margin(c, design, best), bowed_noise_margin(c, design, best, false));
     if (best.noise_margin < params.min_noise_margin) {
       best.verdict = Verdict::margin;
-      return best;
+      return refused(best);
     }
   }
   best.verdict = Verdict::accepted;

@@ -90,7 +90,7 @@ double DetectionStats::total_ms() const {
 DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   frames += o.frames, regions += o.regions, topology += o.topology, area += o.area, geometry += o.geometry;
   angle += o.angle, collinearity += o.collinearity, residual += o.residual, unambiguous += o.unambiguous;
-  decoded += o.decoded, second_looks += o.second_looks, second_look_found += o.second_look_found;
+  decoded += o.decoded, bowed += o.bowed, second_looks += o.second_looks, second_look_found += o.second_look_found;
   outline_reads += o.outline_reads, outline_found += o.outline_found, outline_reads_skipped += o.outline_reads_skipped;
   expected_reads += o.expected_reads, expected_found += o.expected_found;
   borders += o.borders, border_found += o.border_found, borders_ms += o.borders_ms;

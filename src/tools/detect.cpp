@@ -30,6 +30,7 @@ nlohmann::json stats_json(const DetectionStats& s) {
             {"residual", s.residual},
             {"unambiguous", s.unambiguous},
             {"decoded", s.decoded},
+            {"bowed", s.bowed},
             {"second_looks", s.second_looks},
             {"second_look_found", s.second_look_found},
             {"outline_reads", s.outline_reads},

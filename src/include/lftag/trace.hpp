@@ -37,6 +37,8 @@ struct DetectionStats {
                                            // whose hypotheses match the squares' ink stops before)
   std::int64_t unambiguous = 0;            // no other id fitting within the decoding margin
   std::int64_t decoded = 0;                // the squares' ink matches the design: detections
+  std::int64_t bowed = 0;                  // of them, read on a bowed grid (a bent sheet) where the flat
+                                           // grid left the id in doubt
   std::int64_t second_looks = 0;           // patches examined again (see DetectorParams::second_look)
   std::int64_t second_look_found = 0;      // detections made in them (outline readings included)
   std::int64_t outline_reads = 0;          // outlines aligned and read where a patch gave no candidate
