@@ -562,13 +562,9 @@ std::optional<double> read_bowed(const Candidate& c, const CellCentres& design, 
 
 // The homography through all n^2 blobs at their decoded positions.
 std::optional<cv::Matx33d> refit(const Candidate& c, const CellCentres& design, const Decoding& d) {
-  const Family& f = c.family;
-  std::vector<cv::Point2d> units, points;
-  for (int g = 0; g < f.cell_count(); ++g) {
-    units.push_back(design[g][f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g))]);
-    points.push_back(c.blobs[d.blob_of_cell[g]].point);
-  }
-  return fit_homography(units, points);
+  std::vector<cv::Point2d> points;
+  for (const int blob : d.blob_of_cell) points.push_back(c.blobs[blob].point);
+  return fit_homography(units_of(c.family, design, d.id), points);
 }
 
 }  // namespace
