@@ -642,5 +642,11 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
 // Final pose from all n^2 centroids; fills the pose fields, corners and centre.
 bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,
                    Detection& out);
+// The pose (marker -> camera) whose projections of `object` through `k` (no distortion)
+// lie nearest `observed` (least squares in pixels), by Levenberg-Marquardt from
+// (rvec, tvec), which it replaces; left where it is when no pose in front of the camera
+// fits better.
+void refine_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& observed, const cv::Matx33d& k,
+                 cv::Vec3d& rvec, cv::Vec3d& tvec);
 
 }  // namespace lftag::detail
