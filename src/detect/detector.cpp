@@ -345,6 +345,7 @@ std::optional<detail::OutlineReading> read_one_outline(const ImageView& work, co
 // A second look's working state, kept from patch to patch and frame to frame.
 struct PatchLook {
   detail::Patch patch;
+  cv::Mat mean;  // the window means of look_as_searched's threshold
   detail::BinaryImage binary;
   detail::RegionTree tree;
   std::vector<detail::Candidate> candidates;
@@ -362,6 +363,26 @@ bool look_at_patch(const ImageView& image, cv::Rect box, const detail::SecondLoo
   labeller.label(out.binary, out.tree);
   detail::find_candidates(out.tree, out.binary, ImageView(out.patch.grey), p, camera, out.candidates, stats,
                           out.patch.frame, area_rejected, budget_left, skipped);
+  return true;
+}
+
+// The neighbourhood of `box` (a quarter of its side all round, as a second look's patch)
+// looked at as the search looks at the frame: its own threshold, at the frame's resolution.
+// Its candidates in `out.candidates` (within the budget left); false when it is empty.
+bool look_as_searched(const ImageView& image, cv::Rect box, const DetectorParams& p, const Camera& camera,
+                      detail::RegionLabeller& labeller, PatchLook& out, DetectionStats& stats, int* budget_left) {
+  const int margin = std::max(box.width, box.height) / 4;
+  const cv::Rect area = cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin, box.height + 2 * margin) &
+                        cv::Rect(0, 0, image.width, image.height);
+  if (area.empty()) return false;
+  const ImageView view(image.data + std::ptrdiff_t(area.y) * image.stride + area.x, area.width, area.height,
+                       image.stride);
+  detail::threshold_mean(view, p.threshold_window, p.threshold_offset, out.mean, out.binary);
+  labeller.label(out.binary, out.tree);
+  detail::PatchFrame frame;
+  frame.origin = area.tl();
+  detail::find_candidates(out.tree, out.binary, view, p, camera, out.candidates, stats, frame, nullptr, budget_left,
+                          nullptr);
   return true;
 }
 
@@ -475,9 +496,10 @@ void read_borders(const std::vector<detail::BorderProposal>& proposals, const Im
 }
 
 // The markers the caller expects (FrameHints::expected) that the search did not find,
-// each looked for where it is expected: a second look at the place (its squares found
-// and decoded as the search's are, wherever in the patch the marker has moved), then the
-// grey levels under the expected outline read (a marker whose squares the blur merged).
+// each looked for where it is expected: the place looked at as the search looks at the
+// frame, then as a second look would (its squares found and decoded as the search's are,
+// wherever in the patch the marker has moved), then the grey levels under the expected
+// outline read (a marker whose squares the blur merged).
 // Each is taken only as the family and id expected: another id there is refused (a
 // marker that crossed the expected one, which the search finds by itself, or a
 // misreading: a wrong id is worse than a miss). The outline reads are bounded as the
@@ -507,19 +529,26 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
     box = cv::Rect(box.x - grow, box.y - grow, box.width + 2 * grow, box.height + 2 * grow);
     detail::SecondLook look;
     look.sought.reset().set(e.family.n());
-    if (!budget_left || *budget_left > 0) {
+    // A marker that stayed sharp is found as the search found it, at a fraction of a
+    // second look's cost (no enlarged patch, no local extremes); a blurred or shadowed one
+    // by the second look.
+    bool taken = false;
+    for (const bool as_second_look : {false, true}) {
+      if (taken || (budget_left && *budget_left <= 0)) break;
       std::vector<Detection> local;
-      if (look_at_patch(work, box, look, p, camera, labeller, patch_look, stats, budget_left, nullptr, nullptr))
+      if (as_second_look
+              ? look_at_patch(work, box, look, p, camera, labeller, patch_look, stats, budget_left, nullptr, nullptr)
+              : look_as_searched(work, box, p, camera, labeller, patch_look, stats, budget_left))
         decode_candidates(patch_look.candidates, work, camera, p, true, deadline, stats, trace, local);
       const auto it = std::find_if(local.begin(), local.end(), [&](const Detection& d) { return is_expected(e, d); });
-      const bool taken = it != local.end() && !already_found(found, it->center);
+      taken = it != local.end() && !already_found(found, it->center);
       stats.decoded -= std::int64_t(local.size()) - taken;  // the others are not detections
       if (taken) {
         ++stats.expected_found;
         found.push_back(std::move(*it));
-        continue;
       }
     }
+    if (taken) continue;
     OutlineVerdict* verdict = nullptr;
     if (trace) {
       verdict = &trace->outline_reads.emplace_back();

@@ -730,6 +730,45 @@ TEST(Detector, ExpectedMarkersAreReadWhereExpected) {
   EXPECT_EQ(wrong, 0);
 }
 
+// A sharp marker read where expected is read as the search reads it (the frame's own
+// threshold, at its resolution): the same centroids and pose, so that a track's poses do
+// not change with the frames that were searched.
+TEST(Detector, ASharpExpectedMarkerIsReadAsTheSearchReadsIt) {
+  SceneParams p;
+  p.camera = paper_camera();
+  p.noise_sigma = 2;
+  for (const int n : {3, 4}) {
+    SceneMarker m;
+    m.family = Family(n);
+    m.id = TagId(4321);
+    m.tag_size = 0.25;
+    m.tvec = {0.1, 0.05, 2.5};
+    m.rvec = rotation(20, 35, -10);
+    const RenderedScene scene = render_scene(p, {m});
+    DetectorParams params;
+    params.families = {m.family};
+    params.camera = paper_camera();
+    params.tag_size = 0.25;
+    Detector detector(params);
+    const std::vector<Detection> searched = detector.detect(ImageView(scene.image));
+    ASSERT_EQ(searched.size(), 1u) << n;
+    ASSERT_FALSE(searched[0].from_outline) << n;
+    FrameHints hints;
+    hints.full_search = false;
+    ExpectedMarker expected;
+    expected.family = m.family;
+    expected.id = m.id;
+    for (int k = 0; k < 4; ++k) expected.corners[k] = scene.truth[0].corners[k] + cv::Point2d(2, 1);
+    hints.expected.assign(1, expected);
+    const std::vector<Detection> read = detector.detect(ImageView(scene.image), hints);
+    ASSERT_EQ(read.size(), 1u) << n;
+    ASSERT_EQ(read[0].centroids.size(), searched[0].centroids.size()) << n;
+    for (std::size_t i = 0; i < read[0].centroids.size(); ++i)
+      EXPECT_LT(cv::norm(read[0].centroids[i] - searched[0].centroids[i]), 1e-9) << n << ", square " << i;
+    EXPECT_LT(cv::norm(read[0].tvec - searched[0].tvec), 1e-9) << n;
+  }
+}
+
 // Without a full search only the expected markers are read: of two sharp markers, the one
 // expected. An expected marker found by the search is not read again; one expected under
 // another id than the marker there has, or of a family not sought, or where there is no
