@@ -72,7 +72,7 @@ double shape_misfit(const std::vector<double>& log_ink, const std::vector<bool>&
 
 // What cv::solvePnPRefineLM minimises, without its generic machinery (Jacobians for every
 // intrinsic and distortion term, matrices made at every step: 47 us for the 9 points of a
-// 3x3, most of a tracked marker's time) and run until it settles: its 20 steps left
+// 3x3, a fifth of a tracked marker's time) and run until it settles: its 20 steps left
 // markers seen nearly face on, whose error changes slowly with the tilt, short of the
 // optimum (Pose.RefinementReachesTheLeastSquaresOptimum). The rotation moves by a small
 // turn applied in the camera frame.
