@@ -6,8 +6,9 @@
 // it, the white lines between the cells and, in every cell, a dark core (the 2 x 2 units
 // that each of the square's four positions covers). Only the one-unit strips beside each
 // core change with the data. A template of that structure (the strips left grey, blurred
-// to the frame's resolution) is aligned to the frame by ECC (OpenCV's findTransformECC, a
-// homography), starting from the coarse outline of a second look's binary patch. The
+// to the frame's resolution) is aligned to the frame by ECC (the enhanced correlation
+// coefficient over a homography, alignment.cpp), starting from the coarse outline of a
+// second look's binary patch or a border proposal. The
 // corners whose four strips are all dark are the baselines, which fixes the turn; then
 // each data cell's square position is the one whose blurred model fits the cell's grey
 // levels best. Every check is measured against the marker's own levels and units, so it
@@ -18,7 +19,6 @@
 #include <mutex>
 
 #include <opencv2/imgproc.hpp>
-#include <opencv2/video/tracking.hpp>
 
 #include "../core/geometry.hpp"
 #include "stages.hpp"
@@ -1310,13 +1310,17 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   }
   if (per_unit > kTemplateScale) crop = reduced(cv::INTER_AREA);
   cv::Mat warp = warp_of(start);
-  const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 25, 1e-4);
-  double correlation = 0;
-  try {
-    correlation = cv::findTransformECC(*templ, crop, warp, cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
-  } catch (const cv::Exception&) {
-    return std::nullopt;  // did not converge: not a marker's structure
-  }
+  // Each alignment: at most 25 steps, until the correlation changes by less than 1e-4.
+  const EccAlignment alignment(crop);
+  const auto align = [&](const cv::Mat1f& t, cv::Mat& warp_to_crop) {
+    cv::Matx33f w = warp_to_crop;
+    const std::optional<double> c = alignment.align(t, w, 25, 1e-4);
+    if (c) cv::Mat(w).copyTo(warp_to_crop);
+    return c;
+  };
+  const std::optional<double> aligned_at = align(*templ, warp);
+  if (!aligned_at) return std::nullopt;  // did not converge: not a marker's structure
+  double correlation = *aligned_at;
   // Motion blur smears the structure along one direction, which the template does not: a
   // structure that aligned but correlates too little is tried smeared in several
   // directions and lengths, and aligned again with the one that correlates best.
@@ -1384,17 +1388,12 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     }
     if (best_template.empty() || deadline.passed()) return false;
     cv::Mat again = warp.clone();
-    try {
-      const double c =
-          cv::findTransformECC(best_template, crop, again, cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
-      if (c <= correlation) return true;  // the sharper alignment stands, and no smear beats it
-      contrast_scale = structure_contrast(*templ) / structure_contrast(best_template);
-      defocused = best_template;
-      correlation = c, warp = again, templ = &defocused, sigma = best_sigma, defocus = best_units;
-      uneven = best_uneven;
-    } catch (const cv::Exception&) {
-      // the sharper alignment stands
-    }
+    const std::optional<double> c = align(best_template, again);
+    if (!c || *c <= correlation) return true;  // the sharper alignment stands, and no smear beats it
+    contrast_scale = structure_contrast(*templ) / structure_contrast(best_template);
+    defocused = best_template;
+    correlation = *c, warp = again, templ = &defocused, sigma = best_sigma, defocus = best_units;
+    uneven = best_uneven;
     return true;
   };
   if (correlation < kMinCorrelation && correlation >= kMinSmearedCorrelation) {
@@ -1421,15 +1420,11 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     }
     if (!try_defocus(best) && best_along != cv::Point2d() && !deadline.passed()) {
       cv::Mat again = warp.clone();
-      try {
-        const double c = cv::findTransformECC(smeared(*templ, template_kernel(warp, best_along)), crop, again,
-                                              cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
-        if (c > correlation) {
-          correlation = c, warp = again, smear_crop = best_along;
-          smear = {best_along.x / zx, best_along.y / zy};
-        }
-      } catch (const cv::Exception&) {
-        // the unsmeared alignment stands
+      // (When it fails, the unsmeared alignment stands.)
+      if (const std::optional<double> c = align(smeared(*templ, template_kernel(warp, best_along)), again);
+          c && *c > correlation) {
+        correlation = *c, warp = again, smear_crop = best_along;
+        smear = {best_along.x / zx, best_along.y / zy};
       }
     }
   }
@@ -1542,13 +1537,12 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     else if (sigma > 0.3)
       whole = blurred_template(whole, sigma, defocus > 0);
     if (smear_crop != cv::Point2d()) whole = smeared(whole, template_kernel(refined, smear_crop));
-    try {
-      out.marker_correlation =
-          cv::findTransformECC(whole, crop, refined, cv::MOTION_HOMOGRAPHY, criteria, cv::noArray(), 3);
-    } catch (const cv::Exception&) {
+    const std::optional<double> marker_correlation = align(whole, refined);
+    if (!marker_correlation) {
       out.marker_correlation = 0;  // fails the checks
       return out;
     }
+    out.marker_correlation = *marker_correlation;
     cv::Mat(refined).convertTo(cv::Mat(3, 3, CV_64F, w.val), CV_64F);
     const cv::Matx33d final_h = to_frame * w * to_template;
     if (!std::isfinite(final_h(2, 2)) || std::abs(final_h(2, 2)) < 1e-12) {

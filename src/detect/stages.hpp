@@ -440,6 +440,24 @@ std::vector<BorderProposal> propose_borders(const RegionTree& tree, const ImageV
                                             const std::vector<Family>& families, const std::vector<cv::Rect>& taken,
                                             std::vector<BorderProposal>* refused = nullptr);
 
+// ---------------------------------------------------------------- alignment.cpp
+// The alignment of a template to an image under a homography that maximises their
+// enhanced correlation coefficient, as cv::findTransformECC(templ, image, warp,
+// MOTION_HOMOGRAPHY, criteria, noArray(), 3) computes it, with the image's smoothing and
+// gradients made once for every template aligned to it.
+class EccAlignment {
+ public:
+  explicit EccAlignment(const cv::Mat1f& image);
+  // Moves `warp` (template pixels -> image pixels) for at most `max_steps` steps, until the
+  // correlation changes by less than `min_change`; returns the correlation measured before
+  // the last step, or none where cv::findTransformECC throws (the correlation undefined or
+  // about to be minimised).
+  std::optional<double> align(const cv::Mat1f& templ, cv::Matx33f& warp, int max_steps, double min_change) const;
+
+ private:
+  cv::Mat3f prepared_;  // per pixel: smoothed grey level, its x and y derivatives
+};
+
 // ---------------------------------------------------------------- outline.cpp
 // The quadrilateral outlines of the largest groups of black pieces of a patch's binary
 // image that lie in one white region clear of the patch's edge, without specks far from
