@@ -327,6 +327,10 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
                                  ? paper_under(tree, t.region, k, n2, image, reach)
                                  : PaperLevel(255.0);
     c.white_level = paper.level;
+    if (patch.scale == 1) {
+      c.paper = paper;
+      c.paper.origin += patch.origin;
+    }
     bool straddles = false;  // a square across a shadow's edge (kMaxPaperShift)
     for (int j = 0; j < n2; ++j) {
       Blob b = measurer.measure(tree, k[j], image, binary, reach, paper);

@@ -13,6 +13,12 @@
 // level of the ring half a unit further out, the middle of the narrowest gaps, measured
 // where the square is, so that uneven light does not pull the centroid and a sharp
 // square's anti-aliased edge counts whole: in the same conditions the bias is 0.02 %.
+// A shadow's edge near a square is a step in the paper level that no one level fits: the
+// shadowed paper in its window would count as ink. Where the candidate's paper level
+// follows the light (paper_under, a shadow across the marker), each pixel's ink is taken
+// against the paper under it instead (in the field experiment's shadows this took the
+// median translation error on markers AprilTag also found from 0.42 / 0.30 % to 0.18 /
+// 0.06 % for 3x3, tuning / validation).
 #include <algorithm>
 #include <array>
 #include <cstdint>
@@ -76,7 +82,7 @@ Quad observed_quad(const UnitRect& r, double grow, const cv::Matx33d& homography
 }  // namespace
 
 std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
-                                        const cv::Matx33d& homography) {
+                                        const cv::Matx33d& homography, const PaperLevel& paper_level) {
   const double side = family.side();
   if (!(smallest_scale(homography, {side / 2, side / 2}) >= kMinPixelsPerUnit)) return {};
   std::vector<cv::Point2d> out;
@@ -113,6 +119,15 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
     for (int y = window.top; y <= window.bottom; ++y) {
       const auto [a, b] = window.span(y);
       const std::uint8_t* row = image.data + y * image.stride;
+      if (!paper_level.local.empty()) {  // a shadow: each pixel against the paper under it
+        double row_m = 0, row_mx = 0;
+        for (int x = a; x <= b; ++x) {
+          const double ink = paper_level.ink(x, y, row[x]);
+          row_m += ink, row_mx += ink * x;
+        }
+        m += row_m, mx += row_mx, my += row_m * y;
+        continue;
+      }
       std::int64_t row_m = 0, row_mx = 0;
       for (int x = a; x <= b; ++x) {
         const int ink = std::max(0, white - row[x]);

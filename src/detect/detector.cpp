@@ -225,7 +225,8 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     // homography, unbiased by defocus (cell_centroids.cpp); the blobs' for a marker under
     // 1.25 px per unit or by the frame's edge.
     detail::Candidate for_pose = c;
-    const std::vector<cv::Point2d> cells = detail::cell_centroids(work, camera, c.family, d->id, d->homography);
+    const std::vector<cv::Point2d> cells =
+        detail::cell_centroids(work, camera, c.family, d->id, d->homography, c.paper);
     if (!cells.empty()) {
       const std::vector<cv::Point2d> ideal = camera.undistort(cells);
       for (int g = 0; g < c.family.cell_count(); ++g) {

@@ -220,12 +220,33 @@ struct Blob {
   cv::Point2d point;        // undistorted pixels, for geometry
 };
 
+// The paper a square's ink is measured against: one level, or where the light varies
+// across a marker, the level under each pixel (see paper_under).
+struct PaperLevel {
+  PaperLevel(double level = 255) : level(level) {}  // NOLINT: one level is the common case
+  double level;
+  cv::Mat1b local;
+  cv::Point origin;
+  // The ink of grey level g at pixel (x, y): how much darker than the paper there, in
+  // units of `level`.
+  double ink(int x, int y, double g) const {
+    if (local.empty()) return std::max(0.0, level - g);
+    const int u = x - origin.x, v = y - origin.y;
+    if (u < 0 || v < 0 || u >= local.cols || v >= local.rows) return std::max(0.0, level - g);
+    const double paper = std::max<double>(1, local(v, u));
+    return std::max(0.0, paper - g) * level / paper;
+  }
+};
+
 struct Candidate {
   Family family{3};
   int white_region = -1;
   double white_area = 0;    // pixels of the white region
   double white_level = 0;   // upper quartile of the white region's grey levels
   std::vector<Blob> blobs;  // the n^2 largest black children
+  // The paper its squares were measured against, in frame pixels (a local level only for
+  // candidates at the frame's own resolution).
+  PaperLevel paper;
 };
 
 // Topological filtering, vertex estimation and the area constraint. Counts into stats.
@@ -264,21 +285,6 @@ constexpr double kMinPaperSpread = 0.8;
 // model alone could decide its digit). A 3x3 square across a shadow's edge in the field
 // experiment moved 1.9 units, and was read a unit off with the local paper alone.
 constexpr double kMaxPaperShift = 0.5;
-struct PaperLevel {
-  PaperLevel(double level = 255) : level(level) {}  // NOLINT: one level is the common case
-  double level;
-  cv::Mat1b local;
-  cv::Point origin;
-  // The ink of grey level g at pixel (x, y): how much darker than the paper there, in
-  // units of `level`.
-  double ink(int x, int y, double g) const {
-    if (local.empty()) return std::max(0.0, level - g);
-    const int u = x - origin.x, v = y - origin.y;
-    if (u < 0 || v < 0 || u >= local.cols || v >= local.rows) return std::max(0.0, level - g);
-    const double paper = std::max<double>(1, local(v, u));
-    return std::max(0.0, paper - g) * level / paper;
-  }
-};
 
 // The paper a candidate's `count` squares `kids` are measured against: the upper
 // quartile of its white region's grey levels, and, where its squares are large enough for
@@ -650,11 +656,12 @@ double elapsed_ms(std::chrono::steady_clock::time_point start);
 // ---------------------------------------------------------------- cell_centroids.cpp
 // The ink centroids of marker `id`'s squares (grid order, image pixels as observed), each
 // over its square grown by half a unit under `homography` (units -> undistorted pixels),
-// the ink weighed against the median grey of the ring half a unit further out; empty when
-// the marker has under 1.25 pixels per unit, or a window is not wholly inside the image
-// or holds no ink.
+// the ink weighed against the median grey of the ring half a unit further out, or where
+// `paper` has a local level (a shadow across the marker), against the paper under each
+// pixel; empty when the marker has under 1.25 pixels per unit, or a window is not wholly
+// inside the image or holds no ink.
 std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
-                                        const cv::Matx33d& homography);
+                                        const cv::Matx33d& homography, const PaperLevel& paper = {});
 
 // ---------------------------------------------------------------- pose.cpp
 // Final pose from all n^2 centroids; fills the pose fields, corners and centre.

@@ -159,3 +159,57 @@ TEST(CellCentroids, NoneForASmallMarkerOrAWindowOutsideTheFrame) {
                              cv::Matx33d(nan, 0, 0, 0, 1, 0, 0, 0, 1))
                   .empty());
 }
+
+TEST(CellCentroids, AShadowAcrossTheMarkerDoesNotMoveThemWithThePaperUnderIt) {
+  // A hard shadow (0.45 of the light, a 2 px penumbra) across the middle of a 100 px
+  // marker at any angle: the squares and paper it darkens are weighed against the paper
+  // under them (the closed level that paper_under gives a candidate whose light varies).
+  // Against the ring's one median, the shadowed paper round a square near the shadow's
+  // edge counts as ink and pulls its centroid (0.49 px on average here, against 0.11).
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(-1, 1);
+  double near_local = 0, near_ring = 0, far_worst = 0;
+  int near = 0;
+  for (int n : {3, 4})
+    for (int k = 0; k < 6; ++k) {
+      Rendered r = render(n, 100, 0.6, 0, rng);
+      // The same marker rendered again in shadow: the linear image times the light.
+      SceneParams p;
+      p.camera = kCamera;
+      p.background = 0.45;
+      p.noise_sigma = 1;
+      const SceneRenderer renderer(p);
+      cv::Mat1f linear = renderer.render_linear({to_target(r.marker)});
+      cv::GaussianBlur(linear, linear, cv::Size(), 0.6);
+      const double angle = CV_PI * u(rng);
+      const cv::Point2d normal(std::cos(angle), std::sin(angle));
+      const double offset = 6 * u(rng);  // px from the marker's centre
+      const auto from_edge = [&](cv::Point2d q) { return (q - r.truth.center).dot(normal) - offset; };
+      for (int y = 0; y < linear.rows; ++y)
+        for (int x = 0; x < linear.cols; ++x)
+          linear(y, x) *= float(0.45 + 0.55 * std::clamp(0.5 + from_edge(cv::Point2d(x, y)) / 2, 0.0, 1.0));
+      r.image = renderer.quantize(linear, rng());
+      const double per_unit = 100.0 / r.marker.family.side();
+      detail::PaperLevel paper(255);
+      paper.local = detail::paper_level(r.image, int(std::ceil(3 * per_unit * 1.3)) + 2);  // wider than a square
+      const ImageView view(r.image);
+      const std::vector<cv::Point2d> local =
+          cell_centroids(view, kCamera, r.marker.family, r.marker.id, r.homography, paper);
+      const std::vector<cv::Point2d> ring = cell_centroids(view, kCamera, r.marker.family, r.marker.id, r.homography);
+      ASSERT_EQ(local.size(), std::size_t(n * n));
+      ASSERT_EQ(ring.size(), std::size_t(n * n));
+      for (int g = 0; g < n * n; ++g) {
+        const double local_error = cv::norm(local[g] - r.truth.centroids[g]);
+        if (std::abs(from_edge(r.truth.centroids[g])) < 2.5 * per_unit) {  // its window meets the edge
+          near_local += local_error, near_ring += cv::norm(ring[g] - r.truth.centroids[g]), ++near;
+        } else {
+          far_worst = std::max(far_worst, local_error);
+        }
+      }
+    }
+  ASSERT_GT(near, 20);
+  EXPECT_LT(near_local / near, 0.15);
+  EXPECT_LT(near_local, 0.4 * near_ring);
+  EXPECT_GT(near_ring / near, 0.3) << "the set-up no longer shows the ring's bias";
+  EXPECT_LT(far_worst, 0.15);  // the ring's own there: 0.16
+}
