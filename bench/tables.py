@@ -353,6 +353,31 @@ def field_p90_table(results):
                    tuned_validated(rows, system, "all", "visible", cell("p90_rotation_deg", 3))] for system in systems])
 
 
+def field_both_found_table(results, peer="apriltag-36h11-d1"):
+    """Median translation error of each LFTag family and of `peer` on the marker-frames
+    both found (the same poses; each system sees its own markers), from field.csv."""
+    found = defaultdict(dict)  # (set, condition, clip, frame, marker) -> system -> error
+    for r in read(results, "field.csv"):
+        if r["subset"] == "visible" and r["found"] == "1" and r["wrong"] == "0":
+            found[(r["set"], r["condition"], r["clip"], r["frame"], r["marker"])][r["system"]] = \
+                float(r["translation_error_pct"])
+    if not found:
+        return "(field.csv not in this results directory)"
+    systems = sorted({s for v in found.values() for s in v if s.startswith("lftag-")})
+    conditions = [c for c in FIELD_CONDITIONS if any(k[1] == c for k in found)]
+    def cell(system, condition):
+        out = []
+        for st in FIELD_SETS:
+            pairs = [(v[system], v[peer]) for k, v in found.items()
+                     if k[0] == st and k[1] == condition and system in v and peer in v]
+            out.append(f"{statistics.median(a for a, _ in pairs):.3f} vs {statistics.median(b for _, b in pairs):.3f}"
+                       f" ({len(pairs)})" if pairs else "-")
+        return " / ".join(out)
+    return table([f"system (median translation error, % of distance, LFTag vs {peer}, on the markers both found "
+                  "(how many); tuning / validation)"] + conditions,
+                 [[system] + [cell(system, c) for c in conditions] for system in systems])
+
+
 def field_times_table(results, name="field_times.csv"):
     times, systems = {}, []
     for r in read(results, name):
@@ -442,6 +467,7 @@ def main(results):
                         ("Field false positives: the clips' marker-free twins (blank sheets)", field_fp_table),
                         ("Field pose error by condition", field_pose_table),
                         ("Field pose error, all conditions", field_p90_table),
+                        ("Field pose error on the markers both found", field_both_found_table),
                         ("Field frame times", field_times_table),
                         ("Field frame times over AprilTag 36h11 decimate 2's", field_ratio_table),
                         ("Tracking: recall and wrong choices, tracking off / on", tracking_recall_table),
