@@ -326,12 +326,12 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
     const PaperLevel paper = params.centroid_reference == CentroidReference::local_white
                                  ? paper_under(tree, t.region, k, n2, image, reach)
                                  : PaperLevel(255.0);
-    c.white_level = paper.level;
-    if (patch.scale == 1) {
-      c.paper = paper;
+    c.paper = paper;
+    if (patch.scale == 1)
       c.paper.origin += patch.origin;
-    }
-    bool straddles = false;  // a square across a shadow's edge (kMaxPaperShift)
+    else
+      c.paper.local.release();  // the pose reads the frame, not the enlarged patch
+    bool straddles = false;     // a square across a shadow's edge (kMaxPaperShift)
     for (int j = 0; j < n2; ++j) {
       Blob b = measurer.measure(tree, k[j], image, binary, reach, paper);
       if (!paper.local.empty()) {

@@ -242,9 +242,9 @@ struct Candidate {
   Family family{3};
   int white_region = -1;
   double white_area = 0;    // pixels of the white region
-  double white_level = 0;   // upper quartile of the white region's grey levels
   std::vector<Blob> blobs;  // the n^2 largest black children
-  // The paper its squares were measured against, in frame pixels (a local level only for
+  // The paper its squares were measured against: the upper quartile of the white region's
+  // grey levels, and a local level in frame pixels where the light varies (only for
   // candidates at the frame's own resolution).
   PaperLevel paper;
 };

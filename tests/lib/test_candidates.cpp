@@ -339,7 +339,7 @@ TEST(FindCandidates, AMarkerIsOneCandidate) {
   const detail::PaperLevel paper =
       detail::paper_under(a.tree, c.white_region, kids.data(), int(kids.size()), a.view(), 1);
   EXPECT_TRUE(paper.local.empty());  // evenly lit: the white region's level everywhere
-  EXPECT_EQ(paper.level, c.white_level);
+  EXPECT_EQ(paper.level, c.paper.level);
   for (const Blob& b : c.blobs) {
     const Blob direct = detail::BlobMeasurer().measure(a.tree, b.region, a.view(), a.binary, 1, paper);
     EXPECT_EQ(b.mass, direct.mass);
@@ -354,7 +354,7 @@ TEST(FindCandidates, AMarkerIsOneCandidate) {
       if (a.map(y, x) == c.white_region) levels.push_back(a.grey(y, x));
   std::sort(levels.begin(), levels.end());
   const std::size_t q = (3 * levels.size() + 3) / 4 - 1;  // ceil(3/4 count) - 1
-  EXPECT_EQ(c.white_level, levels[q]);
+  EXPECT_EQ(c.paper.level, levels[q]);
   EXPECT_EQ(stats.regions, std::int64_t(a.tree.regions.size()));
   EXPECT_EQ(stats.topology, 1);
   EXPECT_EQ(stats.area, 1);
@@ -374,12 +374,12 @@ TEST(FindCandidates, WhiteLevelFollowsTheCentroidReference) {
   DetectionStats stats;
   std::vector<Candidate> out = run(a, p, stats);
   ASSERT_EQ(out.size(), 1u);
-  EXPECT_NEAR(out[0].white_level, 200.0, 1e-9);  // pixel-aligned: the white region is all 200
+  EXPECT_NEAR(out[0].paper.level, 200.0, 1e-9);  // pixel-aligned: the white region is all 200
   const double local_mass = out[0].blobs[0].mass;
   p.centroid_reference = CentroidReference::full_scale;
   out = run(a, p, stats);
   ASSERT_EQ(out.size(), 1u);
-  EXPECT_EQ(out[0].white_level, 255.0);
+  EXPECT_EQ(out[0].paper.level, 255.0);
   // The ring now weighs 55 per pixel on top of 200 per black pixel.
   EXPECT_GT(out[0].blobs[0].mass, local_mass * 255.0 / 200.0);
 }
@@ -410,7 +410,7 @@ TEST(FindCandidates, LocalWhiteIsTheUpperQuartileOfTheWhiteRegion) {
   DetectionStats stats;
   const std::vector<Candidate> out = run(a, params_for({Family(3)}), stats);
   ASSERT_EQ(out.size(), 1u);
-  EXPECT_EQ(out[0].white_level, expected);
+  EXPECT_EQ(out[0].paper.level, expected);
 }
 
 TEST(FindCandidates, EachSquaresInkIsMeasuredAgainstThePaperAroundIt) {
@@ -428,7 +428,7 @@ TEST(FindCandidates, EachSquaresInkIsMeasuredAgainstThePaperAroundIt) {
   DetectionStats stats;
   const std::vector<Candidate> out = run(a, params_for({Family(3)}), stats);
   ASSERT_EQ(out.size(), 1u);
-  const double level = out[0].white_level;
+  const double level = out[0].paper.level;
   std::vector<int> kids;
   for (const Blob& b : out[0].blobs) {
     EXPECT_NEAR(b.mass, 144 * level, 0.005 * 144 * level) << b.centroid;
@@ -460,7 +460,7 @@ TEST(FindCandidates, SmallSquaresAreMeasuredAgainstTheWhiteRegionsLevel) {
   const detail::PaperLevel paper =
       detail::paper_under(a.tree, out[0].white_region, kids.data(), int(kids.size()), a.view(), 1);
   EXPECT_TRUE(paper.local.empty());
-  EXPECT_EQ(paper.level, out[0].white_level);
+  EXPECT_EQ(paper.level, out[0].paper.level);
 }
 
 TEST(FindCandidates, PointsAreUndistortedCentroids) {
