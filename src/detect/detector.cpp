@@ -367,12 +367,13 @@ bool look_at_patch(const ImageView& image, cv::Rect box, const detail::SecondLoo
   return true;
 }
 
-// The neighbourhood of `box` (a quarter of its side all round, as a second look's patch)
-// looked at as the search looks at the frame: its own threshold, at the frame's resolution.
-// Its candidates in `out.candidates` (within the budget left); false when it is empty.
+// `box` looked at as the search looks at the frame: at the frame's resolution, its pixels
+// binarised as the frame's are (the threshold's window, half of it all round, is taken
+// with them). Its candidates in `out.candidates` (within the budget left); false when it
+// is empty.
 bool look_as_searched(const ImageView& image, cv::Rect box, const DetectorParams& p, const Camera& camera,
                       detail::RegionLabeller& labeller, PatchLook& out, DetectionStats& stats, int* budget_left) {
-  const int margin = std::max(box.width, box.height) / 4;
+  const int margin = p.threshold_window / 2;
   const cv::Rect area = cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin, box.height + 2 * margin) &
                         cv::Rect(0, 0, image.width, image.height);
   if (area.empty()) return false;
