@@ -16,23 +16,9 @@
 #include "stages.hpp"
 
 namespace lftag::detail {
-namespace {
 
-// A pose refined on the centroids, with the observations it was refined against (moved
-// from the centroids of the projected squares to the projections of their centres) and
-// its RMS reprojection error over them.
-struct Solution {
-  cv::Vec3d rvec, tvec;
-  std::vector<cv::Point2d> observed;
-  double rms = 0;
-  double shape_misfit = 0;  // see shape_misfit()
-};
-
-// The pinhole projections of `object` under a pose, as cv::projectPoints computes them
-// without distortion (the same operations in the same order), without its cost for a
-// handful of points (a tenth of a tracked marker's time went to it).
-std::vector<cv::Point2d> project(const std::vector<cv::Point3d>& object, const cv::Vec3d& rvec, const cv::Vec3d& tvec,
-                                 const cv::Matx33d& k) {
+std::vector<cv::Point2d> project_pinhole(const std::vector<cv::Point3d>& object, const cv::Vec3d& rvec,
+                                         const cv::Vec3d& tvec, const cv::Matx33d& k) {
   cv::Matx33d r;
   cv::Rodrigues(rvec, r);
   std::vector<cv::Point2d> out;
@@ -47,9 +33,21 @@ std::vector<cv::Point2d> project(const std::vector<cv::Point3d>& object, const c
   return out;
 }
 
+namespace {
+
+// A pose refined on the centroids, with the observations it was refined against (moved
+// from the centroids of the projected squares to the projections of their centres) and
+// its RMS reprojection error over them.
+struct Solution {
+  cv::Vec3d rvec, tvec;
+  std::vector<cv::Point2d> observed;
+  double rms = 0;
+  double shape_misfit = 0;  // see shape_misfit()
+};
+
 double rms_error(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& image, const cv::Vec3d& rvec,
                  const cv::Vec3d& tvec, const cv::Matx33d& k) {
-  const std::vector<cv::Point2d> reprojected = project(object, rvec, tvec, k);
+  const std::vector<cv::Point2d> reprojected = project_pinhole(object, rvec, tvec, k);
   double sq = 0;
   for (std::size_t i = 0; i < image.size(); ++i) {
     const cv::Point2d e = reprojected[i] - image[i];
@@ -184,7 +182,8 @@ bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, 
   const auto refine = [&](cv::Vec3d rvec, cv::Vec3d tvec) {
     Solution s{rvec, tvec, image, 0};
     if (params.refine_pose) {
-      const std::vector<cv::Point2d> centres = project(object, rvec, tvec, k), quads = project(corners, rvec, tvec, k);
+      const std::vector<cv::Point2d> centres = project_pinhole(object, rvec, tvec, k);
+      const std::vector<cv::Point2d> quads = project_pinhole(corners, rvec, tvec, k);
       for (int g = 0; g < f.cell_count(); ++g) {
         const std::vector<cv::Point2d> quad(quads.begin() + 4 * g, quads.begin() + 4 * g + 4);
         s.observed[g] -= polygon_centroid(quad) - centres[g];

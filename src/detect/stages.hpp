@@ -667,6 +667,11 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
 // Final pose from all n^2 centroids; fills the pose fields, corners and centre.
 bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,
                    Detection& out);
+// The projections of `object` through `k` under a pose, with no distortion: what
+// cv::projectPoints computes there (the same operations in the same order, so the same
+// bits), without its cost for the handful of points of a marker (3 % of a tracked frame).
+std::vector<cv::Point2d> project_pinhole(const std::vector<cv::Point3d>& object, const cv::Vec3d& rvec,
+                                         const cv::Vec3d& tvec, const cv::Matx33d& k);
 // The pose (marker -> camera) whose projections of `object` through `k` (no distortion)
 // lie nearest `observed` (least squares in pixels), by Levenberg-Marquardt from
 // (rvec, tvec), which it replaces; left where it is when no pose in front of the camera

@@ -112,6 +112,27 @@ const Case kCases[] = {
 
 }  // namespace
 
+TEST(ProjectPinhole, IsWhatOpenCVProjectsWithoutDistortion) {
+  // Random poses in front of the camera and behind it, points on and off the plane:
+  // the same bits as cv::projectPoints.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const cv::Matx33d k(900, 0, 641.5, 0, 880, 359.25, 0, 0, 1);
+  for (int trial = 0; trial < 200; ++trial) {
+    const cv::Vec3d rvec(2 * u(rng), 2 * u(rng), 2 * u(rng)), tvec(u(rng), u(rng), 3 * u(rng) + 0.5);
+    std::vector<cv::Point3d> object;
+    for (int i = 0; i < 16; ++i) object.emplace_back(0.1 * u(rng), 0.1 * u(rng), i % 4 == 0 ? 0.05 * u(rng) : 0.0);
+    std::vector<cv::Point2d> expected;
+    cv::projectPoints(object, rvec, tvec, k, cv::noArray(), expected);
+    const std::vector<cv::Point2d> got = detail::project_pinhole(object, rvec, tvec, k);
+    ASSERT_EQ(got.size(), expected.size());
+    for (std::size_t i = 0; i < got.size(); ++i) {
+      EXPECT_EQ(got[i].x, expected[i].x) << "trial " << trial << " point " << i;
+      EXPECT_EQ(got[i].y, expected[i].y) << "trial " << trial << " point " << i;
+    }
+  }
+}
+
 TEST(Pose, TiltedMarkersGiveTheTruePose) {
   // ~100 px markers tilted 30-40 degrees: rotation within 1 degree, translation within 1 %
   // of the distance, with and without lens distortion.
