@@ -21,6 +21,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "../core/geometry.hpp"
+#include "../core/recycled_maps.hpp"
 #include "stages.hpp"
 
 namespace lftag::detail {
@@ -513,7 +514,7 @@ cv::Mat1f smear_kernel(cv::Point2d along) {
 // `image` convolved with a smear kernel (zero outside): a kernel along a line is mostly
 // zeros, and adding shifted copies for its few taps costs less than filter2D's transform.
 cv::Mat1f smeared_by(const cv::Mat1f& image, const cv::Mat1f& kernel) {
-  cv::Mat1f out(image.size(), 0.f);
+  cv::Mat1f out = recycled_map(image.size(), 0.f);
   const int ay = kernel.rows / 2, ax = kernel.cols / 2;
   for (int ky = 0; ky < kernel.rows; ++ky)
     for (int kx = 0; kx < kernel.cols; ++kx) {
@@ -597,9 +598,9 @@ class PixelModel {
     box_ = cv::Rect(box_.x - pad, box_.y - pad, box_.width + 2 * pad, box_.height + 2 * pad) &
            cv::Rect(0, 0, image.width, image.height);
     if (box_.area() == 0 || box_.area() > kMaxPixels) return;
-    grey_.create(box_.size());
+    grey_ = recycled_map(box_.size());
     use_.create(box_.size());
-    fixed_ = cv::Mat1f(box_.size(), 0.f);
+    fixed_ = recycled_map(box_.size(), 0.f);
     for (int g = 0; g < family.cell_count(); ++g) {
       if (family.is_baseline(g)) continue;
       cells_.push_back(g);
@@ -617,7 +618,7 @@ class PixelModel {
         return;
       }
       std::array<Coverage, 4>& squares = squares_.emplace_back();
-      for (Coverage& c : squares) c.rect = r, c.share = cv::Mat1f(r.size(), 0.f);
+      for (Coverage& c : squares) c.rect = r, c.share = recycled_map(r.size(), 0.f);
     }
     // Area shares by supersampling each pixel (about four samples per unit).
     const int k = std::clamp(int(std::ceil(4 / pixels_per_unit)), 2, 8);
@@ -787,14 +788,14 @@ class PixelModel {
   // `m` blurred by a Gaussian of `sigma` pixels (nothing beyond the box).
   static cv::Mat1f blurred_by(const cv::Mat1f& m, double sigma) {
     if (!(sigma > 0.2)) return m;
-    cv::Mat1f out;
+    cv::Mat1f out = recycled_map(m.size());
     cv::GaussianBlur(m, out, cv::Size(), sigma, sigma, cv::BORDER_CONSTANT);
     return out;
   }
 
   // The smear and optical blur under which the marker of `id` fits the grey levels best.
   Choice best_blur(TagId id, double pixels_per_unit) const {
-    cv::Mat1f marker = fixed_.clone();
+    cv::Mat1f marker = recycled_copy(fixed_);
     for (std::size_t i = 0; i < cells_.size(); ++i) {
       const Coverage& square = squares_[i][id.digit(family_.data_index(cells_[i]))];
       marker(square.rect) += square.share;
@@ -860,7 +861,7 @@ class PixelModel {
   Fit fit_at(double sigma, const cv::Mat1f& fixed, const std::vector<std::array<cv::Mat1f, 4>>& smeared_squares,
              TagId start) const {
     // A copy only of what the sums below change (`total`); the squares' maps are read only.
-    cv::Mat1f total = blurred_by(fixed, sigma).clone();
+    cv::Mat1f total = recycled_copy(blurred_by(fixed, sigma));
     std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
     std::vector<int> digit(cells_.size());
     // Where within its rectangle a cell's square can change anything at this blur: its maps
