@@ -5,7 +5,7 @@
 // them a few milliseconds later. Memory that large is given back to the system when it
 // is freed and comes back as fresh pages, each a page fault when first written: in an
 // lftagdetect pipeline over shadowed markers read from their outlines, 180 faults a
-// frame and about a tenth of the element's time. Maps made here take their memory from
+// frame and about 6 % of the element's time. Maps made here take their memory from
 // the buffers their thread freed before.
 #pragma once
 
