@@ -237,7 +237,8 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     for (int g = 0; g < c.family.cell_count(); ++g)
       det.centroids.push_back(for_pose.blobs[d->blob_of_cell[g]].centroid);
     for (int i = 0; i < 4; ++i) det.keypoints[i] = for_pose.blobs[k->blob[i]].centroid;
-    const bool posed = detail::estimate_pose(for_pose, *d, camera, p, det);
+    const bool posed = detail::estimate_pose(for_pose, *d, camera, p, det,
+                                             detail::border_edges(work, camera, c.family, d->homography, p.tag_size));
     stats.pose_ms += elapsed_ms(start);
     Stage outcome = Stage::detected;
     if (!posed)

@@ -4,7 +4,9 @@
 // with it. A blob's centroid is the centroid of its projected square, which perspective moves off
 // the projection of the square's centre; one correction with the first pose removes
 // that bias before the refinement. When the two fit the centroids nearly alike, the
-// squares' inks can tell them apart (DetectorParams::shape_choice_ratio).
+// squares' inks can tell them apart (DetectorParams::shape_choice_ratio). The chosen
+// pose is then refined on the border's stroke as well (border_edges.cpp), where the
+// centroids agree with it.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -93,22 +95,31 @@ double shape_misfit(const std::vector<double>& log_ink, const std::vector<bool>&
 // optimum (Pose.RefinementReachesTheLeastSquaresOptimum). The rotation moves by a small
 // turn applied in the camera frame.
 void refine_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& observed, const cv::Matx33d& k,
-                 cv::Vec3d& rvec, cv::Vec3d& tvec) {
+                 cv::Vec3d& rvec, cv::Vec3d& tvec, const std::vector<EdgePoint>& edges, double edge_weight) {
   using Matrix6 = Eigen::Matrix<double, 6, 6>;
   using Vector6 = Eigen::Matrix<double, 6, 1>;
   cv::Matx33d r;
   cv::Rodrigues(rvec, r);
   // The squared error of (r, t), with the normal equations when asked.
+  const std::size_t points = object.size() + (edge_weight > 0 ? edges.size() : 0);
   const auto evaluate = [&](const cv::Matx33d& r, const cv::Vec3d& t, Matrix6* h, Vector6* g) {
     double cost = 0;
     if (h) h->setZero(), g->setZero();
-    for (std::size_t i = 0; i < object.size(); ++i) {
-      const cv::Vec3d turned = r * cv::Vec3d(object[i].x, object[i].y, object[i].z);
+    for (std::size_t i = 0; i < points; ++i) {
+      const bool edge = i >= object.size();
+      const cv::Point3d& o = edge ? edges[i - object.size()].object : object[i];
+      const cv::Point2d& seen = edge ? edges[i - object.size()].observed : observed[i];
+      const cv::Vec3d turned = r * cv::Vec3d(o.x, o.y, o.z);
       const cv::Vec3d p = turned + t;
       if (!(p[2] > 0)) return std::numeric_limits<double>::infinity();
       const double iz = 1 / p[2], x = p[0] * iz, y = p[1] * iz;
-      const double ex = k(0, 0) * x + k(0, 1) * y + k(0, 2) - observed[i].x, ey = k(1, 1) * y + k(1, 2) - observed[i].y;
-      cost += ex * ex + ey * ey;
+      const double ex = k(0, 0) * x + k(0, 1) * y + k(0, 2) - seen.x, ey = k(1, 1) * y + k(1, 2) - seen.y;
+      // A stroke's point counts only its distance across the stroke: it may lie anywhere along it.
+      const cv::Point2d n =
+          edge ? edges[i - object.size()].normal * (edge_weight * std::sqrt(edges[i - object.size()].weight))
+               : cv::Point2d();
+      const double across = n.x * ex + n.y * ey;
+      cost += edge ? across * across : ex * ex + ey * ey;
       if (!h) continue;
       // d(pixel)/d(camera point), then through p = turned + t: d/dt is the identity and a
       // small turn w moves p by w x turned.
@@ -118,8 +129,14 @@ void refine_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::P
       cross << 0, turned[2], -turned[1], -turned[2], 0, turned[0], turned[1], -turned[0], 0;
       Eigen::Matrix<double, 2, 6> j;
       j << dp * cross, dp;
-      *h += j.transpose() * j;
-      *g += j.transpose() * Eigen::Vector2d(ex, ey);
+      if (edge) {
+        const Eigen::Matrix<double, 1, 6> je = Eigen::RowVector2d(n.x, n.y) * j;
+        *h += je.transpose() * je;
+        *g += je.transpose() * across;
+      } else {
+        *h += j.transpose() * j;
+        *g += j.transpose() * Eigen::Vector2d(ex, ey);
+      }
     }
     return cost;
   };
@@ -137,21 +154,57 @@ void refine_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::P
     const cv::Matx33d r_next = turn * r;
     const cv::Vec3d t_next = tvec + cv::Vec3d(step[3], step[4], step[5]);
     const double next = evaluate(r_next, t_next, nullptr, nullptr);
+    // A step below a ten-billionth of a radian and of the distance changes nothing a
+    // double can show; one that fails there is rounding, not a worse pose.
+    const bool negligible = step.head<3>().norm() < 1e-10 && step.tail<3>().norm() < 1e-10 * cv::norm(tvec);
     if (next < cost) {
-      const bool settled = cost - next <= 1e-12 * cost || step.norm() < 1e-12;
+      const bool settled = cost - next <= 1e-12 * cost || negligible;
       r = r_next, tvec = t_next, cost = next, lambda = std::max(lambda / 10, 1e-12);
       if (settled) break;
       evaluate(r, tvec, &h, &g);
     } else {
       lambda *= 10;
-      if (lambda > 1e12) break;
+      if (lambda > 1e12 || negligible) break;
     }
   }
   cv::Rodrigues(r, rvec);
 }
 
+namespace {
+
+// The 99th percentile of the F distribution with (6, 2n^2 - 6) degrees of freedom, for
+// n = 3..8: how much the centroids' squared error may grow, over its share of their
+// noise, when the pose also has to fit the border's stroke, before the two disagree
+// (1 % of markers that agree would be refused).
+constexpr double kCentroidsAgree[] = {4.821, 3.591, 3.243, 3.088, 3.004, 2.953};
+
+// `chosen` refined on the border's stroke as well as the centroids, each of its points
+// weighed by the centroids' noise over the stroke's (the centroids' measured from their
+// own fit),
+// unless the centroids then fit worse than their noise allows: the marker is not the
+// flat rigid square the two share (a bent sheet, a rolling shutter's skew), and the
+// centroids, nearer its centre, are the better guide. 2x2 has two degrees of freedom
+// left over its four centroids, too few to measure their noise.
+void add_border_edges(const std::vector<cv::Point3d>& object, const cv::Matx33d& k, const BorderEdges& edges,
+                      Solution& chosen) {
+  const int freedom = 2 * int(object.size()) - 6;
+  const int n = int(std::lround(std::sqrt(double(object.size()))));
+  if (edges.sides.empty() || n < 3 || n > 8 || !(chosen.rms > 0)) return;
+  const double weight = chosen.rms * std::sqrt(double(object.size()) / freedom) / edges.noise;
+  if (!(weight > 0) || !std::isfinite(weight)) return;
+  cv::Vec3d rvec = chosen.rvec, tvec = chosen.tvec;
+  refine_pose(object, chosen.observed, k, rvec, tvec, edges.sides, weight);
+  const double rms = rms_error(object, chosen.observed, rvec, tvec, k);
+  const double growth = (rms * rms / (chosen.rms * chosen.rms) - 1) * freedom / 6;
+  if (!(growth <= kCentroidsAgree[n - 3])) return;
+  // Its rms stays its own fit's to the centroids: what the ambiguity ratio compares.
+  chosen.rvec = rvec, chosen.tvec = tvec;
+}
+
+}  // namespace
+
 bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,
-                   Detection& out) {
+                   Detection& out, const BorderEdges& edges) {
   const Family& f = c.family;
   const double size = params.tag_size;
   std::vector<cv::Point3d> object;
@@ -213,7 +266,8 @@ bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, 
   if (solutions.size() > 1 && solutions[1].rms < params.shape_choice_ratio * solutions[0].rms &&
       solutions[1].shape_misfit < solutions[0].shape_misfit)
     std::swap(solutions[0], solutions[1]);
-  const Solution& best = solutions[0];
+  Solution& best = solutions[0];
+  if (params.refine_pose) add_border_edges(object, k, edges, best);
   const cv::Vec3d rvec = best.rvec, tvec = best.tvec;
   out.reprojection_error = best.rms;
   out.alternative_rvec = out.alternative_tvec = cv::Vec3d();

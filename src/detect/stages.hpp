@@ -18,6 +18,7 @@
 //   tau3, decoding error      max_decode_error,                 decode (decode.cpp)
 //                             max_cell_residual, min_decode_margin, max_ink_spread
 //   final pose (IPPE)         refine_pose, tag_size, camera     cell_centroids (cell_centroids.cpp),
+//                                                               border_edges (border_edges.cpp),
 //                                                               estimate_pose (pose.cpp)
 //   (not in the paper)        second_look, max_second_looks     near_candidates, enlarge_patch,
 //                                                               binarise_patch (second_look.cpp)
@@ -663,10 +664,32 @@ double elapsed_ms(std::chrono::steady_clock::time_point start);
 std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
                                         const cv::Matx33d& homography, const PaperLevel& paper = {});
 
+// ---------------------------------------------------------------- border_edges.cpp
+// A point of the border's stroke, seen: the marker-frame point `object` on the stroke's
+// centre line was found at `observed` (undistorted pixels); `normal` is the unit normal
+// of its side's line there; `weight` is how many points it stands for.
+struct EdgePoint {
+  cv::Point3d object;
+  cv::Point2d observed, normal;
+  double weight = 1;
+};
+struct BorderEdges {
+  std::vector<EdgePoint> points;  // as found, outliers to their side's line dropped
+  // Each side's line, as two points standing for that side's points (what the pose uses).
+  std::vector<EdgePoint> sides;
+  double noise = 0;  // the points' RMS scatter about their sides' lines, pixels
+};
+// Points of the centre line of the black border of a marker of `family` under
+// `homography` (units -> undistorted pixels), up to 16 a side; none when the marker has
+// under 1.25 pixels per unit.
+BorderEdges border_edges(const ImageView& image, const Camera& camera, const Family& family,
+                         const cv::Matx33d& homography, double tag_size);
+
 // ---------------------------------------------------------------- pose.cpp
-// Final pose from all n^2 centroids; fills the pose fields, corners and centre.
+// Final pose from all n^2 centroids and, when given, the border's inner edge; fills the
+// pose fields, corners and centre.
 bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,
-                   Detection& out);
+                   Detection& out, const BorderEdges& edges = {});
 // The projections of `object` through `k` under a pose, with no distortion: what
 // cv::projectPoints computes there (the same operations in the same order, so the same
 // bits), without its cost for the handful of points of a marker (3 % of a tracked frame).
@@ -676,7 +699,9 @@ std::vector<cv::Point2d> project_pinhole(const std::vector<cv::Point3d>& object,
 // lie nearest `observed` (least squares in pixels), by Levenberg-Marquardt from
 // (rvec, tvec), which it replaces; left where it is when no pose in front of the camera
 // fits better.
+// Edge points, when given, add their distances along their normals, times
+// `edge_weight` and the square root of their own weight, to the squares minimised.
 void refine_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& observed, const cv::Matx33d& k,
-                 cv::Vec3d& rvec, cv::Vec3d& tvec);
+                 cv::Vec3d& rvec, cv::Vec3d& tvec, const std::vector<EdgePoint>& edges = {}, double edge_weight = 0);
 
 }  // namespace lftag::detail

@@ -23,40 +23,14 @@ namespace {
 
 const Camera kCamera = Camera::pinhole(800, 800, 319.5, 239.5, 640, 480);
 
-struct Rendered {
-  SceneMarker marker;
-  MarkerTruth truth;
-  cv::Mat1b image;
-  cv::Matx33d homography;  // units -> pixels, from the true outer corners
-};
+using Rendered = lftag::test::RenderedMarker;
 
 // A marker `pixels` across at a random turn, tilt (up to 30 degrees) and sub-pixel place,
 // defocused by `defocus` px and lit by a gradient of `gradient` across the frame.
 Rendered render(int n, double pixels, double defocus, double gradient, std::mt19937_64& rng, cv::Point2d at = {0, 0}) {
-  std::uniform_real_distribution<double> u(-1, 1);
-  Rendered r;
-  r.marker.family = Family(n);
-  r.marker.id = random_id(r.marker.family, rng);
-  r.marker.tag_size = 0.1;
-  const double z = kCamera.fx * 0.1 / pixels;
-  r.marker.tvec = {(at.x + 0.4 * u(rng)) * z / kCamera.fx, (at.y + 0.4 * u(rng)) * z / kCamera.fx, z};
-  r.marker.rvec = rotation(180 * u(rng), 30 * u(rng), 30 * u(rng));
-  SceneParams p;
-  p.camera = kCamera;
-  p.background = 0.45;
-  p.light_gradient = gradient;
-  p.light_angle_deg = 360 * u(rng);
-  p.noise_sigma = 1;
-  const SceneRenderer renderer(p);
-  cv::Mat1f linear = renderer.render_linear({to_target(r.marker)});
-  if (defocus > 0) cv::GaussianBlur(linear, linear, cv::Size(), defocus);
-  r.image = renderer.quantize(linear, rng());
-  r.truth = make_truth(kCamera, r.marker);
-  const double s = r.marker.family.side();
-  const std::vector<cv::Point2f> units{{0, 0}, {float(s), 0}, {float(s), float(s)}, {0, float(s)}};
-  const std::vector<cv::Point2f> corners(r.truth.corners.begin(), r.truth.corners.end());
-  r.homography = cv::Matx33d(cv::getPerspectiveTransform(units, corners));
-  return r;
+  test::Look look;
+  look.defocus = defocus, look.gradient = gradient, look.at = at;
+  return test::render_marker(kCamera, n, pixels, look, rng);
 }
 
 // Mean over the outer cells of each centroid's error along the direction from the

@@ -2,6 +2,7 @@
 // Final pose from all n^2 centroids (src/detect/pose.cpp), on rendered scenes with known poses.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -32,9 +33,11 @@ struct Case {
   double roll, tilt, pan;
   bool distortion;
   double pixels = 100;  // marker size in the image
+  double noise = 0;     // grey levels
 };
 
 struct Posed {
+  cv::Mat1b image;
   SceneMarker marker;
   MarkerTruth truth;
   Camera camera;
@@ -51,6 +54,7 @@ std::optional<Posed> prepare(const Case& c) {
   sp.camera = Camera::pinhole(500, 500, 319.5, 239.5, 640, 480);
   if (c.distortion) sp.camera.distortion = {-0.25, 0.08, 0.001, -0.001, 0};
   sp.background = 0.8;
+  sp.noise_sigma = c.noise;
   p.marker.family = Family(c.n);
   p.marker.id = c.id;
   p.marker.tag_size = 0.2;
@@ -61,7 +65,7 @@ std::optional<Posed> prepare(const Case& c) {
   p.truth = scene.truth[0];
   EXPECT_TRUE(p.truth.fully_visible);
 
-  const cv::Mat1b& image = scene.image;
+  const cv::Mat1b& image = p.image = scene.image;
   const int level = int(255 * (p.marker.white + p.marker.black) / 2);
   const detail::BinaryImage binary = test::binary_from_mask(image < level);
   detail::RegionTree tree;
@@ -444,4 +448,79 @@ TEST(Pose, RefinementReachesTheLeastSquaresOptimum) {
       }
   EXPECT_EQ(cases, 144);
   EXPECT_GT(short_of_it, 0);  // as refine_pose's comment says
+}
+
+TEST(Pose, TheBordersStrokeSharpensANoisyPose) {
+  // 30 3x3 and 4x4 markers of 60 to 100 px, tilted up to 40 degrees, under noise of 10
+  // grey levels: refined on the border's stroke as well as the centroids, the median
+  // distance error falls by a third or more, and no marker's pose gets much worse.
+  std::mt19937_64 rng(21);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<double> with, without;
+  for (int k = 0; k < 30; ++k) {
+    const Family f(3 + k % 2);
+    const Case c{f.n(), test::random_id(f, rng), 180 * u(rng), 40 * u(rng), 20 * u(rng), false, 80 + 20 * u(rng), 10};
+    const std::string what = describe(c);
+    const auto p = prepare(c);
+    ASSERT_TRUE(p) << what;
+    const detail::BorderEdges edges =
+        detail::border_edges(ImageView(p->image), p->camera, f, p->decoding.homography, p->marker.tag_size);
+    ASSERT_GT(edges.points.size(), 40u) << what;
+    Detection joint, alone;
+    ASSERT_TRUE(
+        detail::estimate_pose(p->candidate, p->decoding, p->camera, pose_params(p->marker.tag_size), joint, edges));
+    ASSERT_TRUE(detail::estimate_pose(p->candidate, p->decoding, p->camera, pose_params(p->marker.tag_size), alone));
+    const double distance = cv::norm(p->marker.tvec);
+    with.push_back(std::abs(cv::norm(joint.tvec) - distance) / distance);
+    without.push_back(std::abs(cv::norm(alone.tvec) - distance) / distance);
+    EXPECT_LT(with.back(), without.back() + 0.002) << what;
+  }
+  std::sort(with.begin(), with.end());
+  std::sort(without.begin(), without.end());
+  EXPECT_LT(with[15], without[15] * 2 / 3) << with[15] << " against " << without[15];
+}
+
+TEST(Pose, WhereTheStrokeDisagreesWithTheCentroidsTheCentroidsPoseStands) {
+  // A marker whose border's stroke is seen 3 % further out than the centroids place it
+  // (the sides of a sheet bent on a cylinder do so, nearer the camera than the plane
+  // through the centroids): the centroids would fit far worse than their noise, so the
+  // pose is theirs alone. The same stroke where the centroids put it refines the pose.
+  auto p = prepare(kCases[1]);
+  ASSERT_TRUE(p);
+  std::mt19937_64 rng(23);
+  std::normal_distribution<double> noise(0, 0.05);
+  for (detail::Blob& b : p->candidate.blobs) b.point += cv::Point2d(noise(rng), noise(rng));
+  const Family& f = p->marker.family;
+  const auto stroke = [&](double scale) {
+    detail::BorderEdges edges;
+    const double s = f.side();
+    for (int i = 0; i <= 16; ++i) {
+      const double t = 3 + (s - 6) * i / 16;
+      for (const cv::Point2d u : {cv::Point2d(t, 1), cv::Point2d(s - 1, t), cv::Point2d(t, s - 1), cv::Point2d(1, t)}) {
+        const cv::Point3d object = f.to_marker_frame(u, p->marker.tag_size);
+        const cv::Point3d seen =
+            f.to_marker_frame((u - cv::Point2d(s / 2, s / 2)) * scale + cv::Point2d(s / 2, s / 2), p->marker.tag_size);
+        const std::vector<cv::Point2d> q = p->camera.project({seen}, p->marker.rvec, p->marker.tvec);
+        const cv::Point3d along = u.y == 1 || u.y == s - 1 ? cv::Point3d(1e-3, 0, 0) : cv::Point3d(0, 1e-3, 0);
+        const std::vector<cv::Point2d> a = p->camera.project({object, object + along}, p->marker.rvec, p->marker.tvec);
+        cv::Point2d normal(-(a[1] - a[0]).y, (a[1] - a[0]).x);
+        edges.sides.push_back({object, q[0] + cv::Point2d(noise(rng), noise(rng)), normal / cv::norm(normal)});
+      }
+    }
+    edges.noise = 0.05;
+    return edges;
+  };
+  const DetectorParams params = pose_params(p->marker.tag_size);
+  Detection alone, bent, flat;
+  ASSERT_TRUE(detail::estimate_pose(p->candidate, p->decoding, p->camera, params, alone));
+  ASSERT_TRUE(detail::estimate_pose(p->candidate, p->decoding, p->camera, params, bent, stroke(1.03)));
+  ASSERT_TRUE(detail::estimate_pose(p->candidate, p->decoding, p->camera, params, flat, stroke(1.0)));
+  EXPECT_EQ(bent.rvec, alone.rvec);
+  EXPECT_EQ(bent.tvec, alone.tvec);
+  EXPECT_NE(flat.tvec, alone.tvec);
+  const double distance = cv::norm(p->marker.tvec);
+  EXPECT_LT(cv::norm(flat.tvec - p->marker.tvec), 0.002 * distance);
+  // The reprojection error and the ambiguity ratio stay the centroids' own fits'.
+  EXPECT_EQ(flat.reprojection_error, alone.reprojection_error);
+  EXPECT_EQ(flat.ambiguity_ratio, alone.ambiguity_ratio);
 }

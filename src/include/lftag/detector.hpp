@@ -159,8 +159,9 @@ struct DetectorParams {
   // default) selects Camera::default_for(frame): decoding is unaffected; poses are then
   // marked uncalibrated. A camera given here must pass Camera::validate().
   std::optional<Camera> camera;
-  double tag_size = 0.1;    // metres, outer edge of the black border
-  bool refine_pose = true;  // iterative refinement of the final pose on all n^2 centroids
+  double tag_size = 0.1;  // metres, outer edge of the black border
+  // Iterative refinement of the final pose on all n^2 centroids and the border's stroke.
+  bool refine_pose = true;
   // The planar pose's two solutions (see Detection::ambiguity_ratio) are told apart by how
   // well they fit the n^2 centroids, and, when the other fits within this factor of the
   // best, by the squares' foreshortening instead: the side of the marker nearer the camera
@@ -209,7 +210,9 @@ struct Detection {
   double worst_cell = 0;                 // largest centroid offset from its decoded position, units
   double ink_spread = 0;                 // ink per design area, largest / smallest square
   double edge_score = 0;                 // mean Sobel magnitude along the inner border edge
-  double reprojection_error = 0;         // RMS of the final pose over the n^2 centroids, pixels
+  // RMS over the n^2 centroids of the chosen solution fitted to them, pixels (rvec/tvec
+  // are then refined on the border's stroke as well, where the two agree).
+  double reprojection_error = 0;
   // How sure the id is: how many standard deviations of the noise measured on this marker
   // its least certain data cell stands from reading as another digit (every digit pattern
   // is an id, so one cell read wrong is another marker's id). From the blobs' scatter about
