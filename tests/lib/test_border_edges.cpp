@@ -57,7 +57,8 @@ TEST(BorderEdges, PointsLieOnTheStrokesCentreLine) {
   // 3x3, 4x4 and 6x6 markers of 2 to 8 px a unit, sharp and defocused by 1.2 px: nearly
   // every sampled point is kept, each within 0.15 px of its side's true centre line
   // (pixel quantisation at 2 px a unit), their median within 0.02 px, and their scatter
-  // is measured.
+  // is measured. Defocused by 0.58 units (1.2 px at 2 px a unit), the stroke is not used:
+  // the squares' blurred ink darkens the paper inside it.
   std::mt19937_64 rng(11);
   for (const int n : {3, 4, 6})
     for (const double pixels : {50.0, 90.0, 200.0})
@@ -67,6 +68,10 @@ TEST(BorderEdges, PointsLieOnTheStrokesCentreLine) {
         const RenderedMarker r = render_marker(kCamera, n, pixels * (n + 1) / 4, look, rng);
         const BorderEdges edges =
             border_edges(ImageView(r.image), kCamera, r.marker.family, r.homography, r.marker.tag_size);
+        if (defocus / (pixels / 24) > 0.5) {
+          EXPECT_TRUE(edges.points.empty() && edges.sides.empty()) << n << "x" << n << " " << pixels << " px";
+          continue;
+        }
         const std::vector<double> d = offsets(r, edges);
         const int sampled = 4 * std::min(16, r.marker.family.side() - 5);
         EXPECT_GE(int(d.size()), sampled * 9 / 10) << n << "x" << n << " " << pixels << " px";
@@ -85,7 +90,7 @@ TEST(BorderEdges, PointsLieOnTheStrokesCentreLine) {
 }
 
 TEST(BorderEdges, AToneCurveUnderDefocusDoesNotMoveThem) {
-  // A gamma of 0.5, 1 and 2 on 120 px markers defocused by 2 px: the stroke stays
+  // A gamma of 0.5, 1 and 2 on 150 px markers defocused by 1 px: the stroke stays
   // centred where the edges on either side of it move apart or together (a tone curve
   // makes a blurred edge's rise asymmetric), so the pose's scale does not change with
   // the exposure.
@@ -93,8 +98,8 @@ TEST(BorderEdges, AToneCurveUnderDefocusDoesNotMoveThem) {
   for (const double gamma : {0.5, 1.0, 2.0})
     for (int k = 0; k < 6; ++k) {
       Look look;
-      look.defocus = 2, look.gamma = gamma;
-      const RenderedMarker r = render_marker(kCamera, 3 + k % 2, 120, look, rng);
+      look.defocus = 1, look.gamma = gamma;
+      const RenderedMarker r = render_marker(kCamera, 3 + k % 2, 150, look, rng);
       const BorderEdges edges =
           border_edges(ImageView(r.image), kCamera, r.marker.family, r.homography, r.marker.tag_size);
       const std::vector<double> d = offsets(r, edges);
