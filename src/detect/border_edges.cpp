@@ -24,8 +24,8 @@ namespace {
 // Units of paper either side of the stroke: half the narrowest gap to a square, so that
 // blur brings in as little of a square as of the background past a two-unit margin.
 constexpr double kReach = 1.0;
-constexpr double kStep = 0.5;    // pixels between the profile's samples, up to
-constexpr int kMaxSamples = 33;  // samples a profile: an eighth of a unit apart at most
+constexpr double kStep = 0.5;    // pixels between the profile's samples,
+constexpr int kMaxSamples = 33;  // but no more than this many (an eighth of a unit apart)
 // Units kept from the centre line's ends, where the crossing side's stroke lies across
 // the profile.
 constexpr double kCornerClearance = 2;

@@ -681,13 +681,14 @@ struct BorderEdges {
 };
 // Points of the centre line of the black border of a marker of `family` under
 // `homography` (units -> undistorted pixels), up to 16 a side; none when the marker has
-// under 1.25 pixels per unit.
+// under 1.25 pixels per unit or its stroke is blurred by more than about 0.45 units, and
+// none where the stroke has no white margin beside it.
 BorderEdges border_edges(const ImageView& image, const Camera& camera, const Family& family,
                          const cv::Matx33d& homography, double tag_size);
 
 // ---------------------------------------------------------------- pose.cpp
-// Final pose from all n^2 centroids and, when given, the border's inner edge; fills the
-// pose fields, corners and centre.
+// Final pose from all n^2 centroids and, when given, the border's stroke; fills the pose
+// fields, corners and centre.
 bool estimate_pose(const Candidate& c, const Decoding& d, const Camera& camera, const DetectorParams& params,
                    Detection& out, const BorderEdges& edges = {});
 // The projections of `object` through `k` under a pose, with no distortion: what
@@ -699,7 +700,7 @@ std::vector<cv::Point2d> project_pinhole(const std::vector<cv::Point3d>& object,
 // lie nearest `observed` (least squares in pixels), by Levenberg-Marquardt from
 // (rvec, tvec), which it replaces; left where it is when no pose in front of the camera
 // fits better.
-// Edge points, when given, add their distances along their normals, times
+// Stroke points, when given, add their distances along their normals, times
 // `edge_weight` and the square root of their own weight, to the squares minimised.
 void refine_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& observed, const cv::Matx33d& k,
                  cv::Vec3d& rvec, cv::Vec3d& tvec, const std::vector<EdgePoint>& edges = {}, double edge_weight = 0);
