@@ -26,9 +26,15 @@ namespace {
 constexpr double kReach = 1.0;
 constexpr double kStep = 0.5;    // pixels between the profile's samples,
 constexpr int kMaxSamples = 33;  // but no more than this many (an eighth of a unit apart)
+// Units of paper either side of the stroke in the window whose centroid is its centre
+// (see stroke_centre), and the window's moves towards it: at most kMaxShifts, until a
+// move is under kSettled units (2 to 4 moves on rendered strokes).
+constexpr double kPaperInWindow = 0.5;
+constexpr int kMaxShifts = 8;
+constexpr double kSettled = 3e-4;
 // Units kept from the centre line's ends, where the crossing side's stroke lies across
 // the profile.
-constexpr double kCornerClearance = 2;
+constexpr double kCornerClearance = 3;
 constexpr int kMaxPointsPerSide = 16;       // enough to fix a line; more only costs
 constexpr double kMinPixelsPerUnit = 1.25;  // as the cell centroids (a unit must hold pixels)
 // A point whose ink is under this fraction of the sides' median is not the border's
@@ -37,14 +43,15 @@ constexpr double kMinInk = 0.5;
 // The two sides of the stroke differ in paper level by at most this fraction of the
 // contrast: more is no white margin, or light that one level cannot stand for.
 constexpr double kPaperMismatch = 0.25;
-// The ink's variance across the stroke (units^2; a sharp stroke's is 1/3, a blur of s
-// units adds s^2) above which the marker's stroke is not used: blurred by more than
-// about 0.45 units, the paper inside the stroke, two units wide before the squares, is
-// darkened by them where a wide margin outside is not, and the centre moves inwards
-// (0.002 units at a blur of 0.4, 0.007 at 0.5, 0.018 at 0.6, in a profile model with the
-// squares two units in and a six-unit margin). In the video experiment, without this
-// bound, markers under 2.5 pixels a unit came out up to 0.09 % of their distance too far.
-constexpr double kMaxSpread = 0.5;
+// The ink's variance across the whole profile (units^2; a sharp stroke's is 1/3, a blur
+// of s units adds s^2, and the pixel's own size some more) above which the marker's
+// stroke is not used: blurred by more than about 0.6 to 0.8 units, the squares two units
+// inside reach the centre's window and move it inwards (on rendered 3x3 markers with a
+// six-unit margin 0.0012 to 0.0018 units at a blur of 0.6, 0.004 to 0.005 at 0.7,
+// 0.008 at 0.8). Chosen on the tuning sets of the field and video experiments among
+// 0.5, 0.6 and 0.65: the higher, the nearer the small markers' poses came (at 1080p
+// through H.264 and under 2 px a unit in the video), with no condition worse.
+constexpr double kMaxSpread = 0.65;
 // Points further than this many times the side's RMS distance from its line are dropped.
 constexpr double kOutlier = 3;
 constexpr double kLeastScatter = 0.02;  // pixels: a sharp rendered stroke's scatter
@@ -102,13 +109,18 @@ struct Found {
 };
 
 // The centre line of the border's stroke along the normal through `outer` (the outer
-// edge, image pixels as observed), `inward` a unit's step into the marker: the centroid
-// of the ink from a unit outside the stroke to a unit inside it. The ink is weighed
-// against the brighter end's paper: a level interpolated between the two ends takes the
-// darker background, blurred in past a narrow margin, for paper, and moves the centre
-// inwards (0.01 px, a tenth of a percent of the distance, on 50 px markers defocused by
-// 1.2 px; BorderEdges.PointsLieOnTheStrokesCentreLine). False when the two ends are not
-// paper alike (no white margin, a shadow's edge along the border) or no ink is found.
+// edge, image pixels as observed), `inward` a unit's step into the marker. The ink is
+// weighed against the brighter end's paper: a level interpolated between the two ends
+// takes the darker background, blurred in past a narrow margin, for paper, and moves the
+// centre inwards (0.01 px, a tenth of a percent of the distance, on 50 px markers
+// defocused by 1.2 px; BorderEdges.PointsLieOnTheStrokesCentreLine). The centre is the
+// ink's centroid in a window of the stroke and kPaperInWindow either side, centred on
+// it: a blurred stroke's tails, cut alike on both sides, do not move it, and the squares
+// two units inside reach the window only by a blur's far tail. (Over the whole profile
+// the squares' ink moves it inwards: by 0.018 units at a blur of 0.6 units, against
+// 0.0015 in the window, in a profile model with the squares two units in and a six-unit
+// margin.) False when the two ends are not paper alike (no white margin, a shadow's edge
+// along the border), no ink is found, or the centre leaves the profile's middle.
 bool stroke_centre(const ImageView& image, cv::Point2d outer, cv::Point2d inward, cv::Point2d& centre, double& ink,
                    double& spread) {
   const double unit = cv::norm(inward);
@@ -124,19 +136,33 @@ bool stroke_centre(const ImageView& image, cv::Point2d outer, cv::Point2d inward
   const double darkest = *std::min_element(grey, grey + samples);
   const double contrast = std::min(out_paper, in_paper) - darkest;
   if (!(contrast > 0) || std::abs(out_paper - in_paper) > kPaperMismatch * contrast) return false;
-  double sum = 0, moment = 0;
+  double dark[kMaxSamples], sum = 0, moment = 0;
   for (int i = 0; i < samples; ++i) {
-    const double v = std::max(0.0, std::max(out_paper, in_paper) - grey[i]);
-    sum += v, moment += v * (kFrom + i * step);
+    dark[i] = std::max(0.0, std::max(out_paper, in_paper) - grey[i]);
+    sum += dark[i], moment += dark[i] * (kFrom + i * step);
   }
   if (!(sum > 0)) return false;
+  // The blur, measured over the whole profile.
   const double mean = moment / sum;
   double second = 0;
-  for (int i = 0; i < samples; ++i) {
-    const double v = std::max(0.0, std::max(out_paper, in_paper) - grey[i]), d = kFrom + i * step - mean;
-    second += v * d * d;
+  for (int i = 0; i < samples; ++i) second += dark[i] * (kFrom + i * step - mean) * (kFrom + i * step - mean);
+  // The centre, from the predicted one: samples at the window's ends count in part, so
+  // that the centroid moves smoothly with the window.
+  constexpr double kHalfWindow = 1 + kPaperInWindow;
+  double middle = std::clamp(mean, 1 - (kReach - kPaperInWindow), 1 + (kReach - kPaperInWindow));
+  for (int shift = 0; shift < kMaxShifts; ++shift) {
+    double weight = 0, weighted = 0;
+    for (int i = 0; i < samples; ++i) {
+      const double at = kFrom + i * step, w = std::clamp((kHalfWindow - std::abs(at - middle)) / step + 0.5, 0.0, 1.0);
+      weight += w * dark[i], weighted += w * dark[i] * at;
+    }
+    if (!(weight > 0)) return false;
+    const double moved = weighted / weight - middle;
+    middle += moved;
+    if (std::abs(moved) < kSettled) break;
   }
-  centre = outer + inward * mean;
+  if (!(std::abs(middle - 1) <= kReach - kPaperInWindow)) return false;
+  centre = outer + inward * middle;
   ink = sum * step;
   spread = second / sum;
   return true;

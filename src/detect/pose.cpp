@@ -180,10 +180,9 @@ constexpr double kCentroidsAgree[] = {4.821, 3.591, 3.243, 3.088, 3.004, 2.953};
 
 // `chosen` refined on the border's stroke as well as the centroids, each of its points
 // weighed by the centroids' noise over the stroke's (the centroids' measured from their
-// own fit),
-// unless the centroids then fit worse than their noise allows: the marker is not the
-// flat rigid square the two share (a bent sheet, a rolling shutter's skew), and the
-// centroids, nearer its centre, are the better guide. 2x2 has two degrees of freedom
+// own fit), unless the centroids then fit worse than their noise allows: the marker is
+// not the flat rigid square the two share (a bent sheet, a rolling shutter's skew), and
+// the centroids, nearer its centre, are the better guide. 2x2 has two degrees of freedom
 // left over its four centroids, too few to measure their noise.
 void add_border_edges(const std::vector<cv::Point3d>& object, const cv::Matx33d& k, const BorderEdges& edges,
                       Solution& chosen) {

@@ -54,26 +54,29 @@ double median(std::vector<double> v) {
 }  // namespace
 
 TEST(BorderEdges, PointsLieOnTheStrokesCentreLine) {
-  // 3x3, 4x4 and 6x6 markers of 2 to 8 px a unit, sharp and defocused by 1.2 px: nearly
-  // every sampled point is kept, each within 0.15 px of its side's true centre line
-  // (pixel quantisation at 2 px a unit), their median within 0.02 px, and their scatter
-  // is measured. Defocused by 0.58 units (1.2 px at 2 px a unit), the stroke is not used:
-  // the squares' blurred ink darkens the paper inside it.
+  // 3x3, 4x4 and 6x6 markers of 2 to 8 px a unit, sharp and defocused by 1.2 and 2.4 px:
+  // nearly every sampled point is kept, each within 0.15 px of its side's true centre
+  // line (pixel quantisation at 2 px a unit), their median within 0.02 px, and their
+  // scatter is measured. Defocused by 1.15 units (2.4 px at 2 px a unit), the stroke is
+  // not used: the squares' blurred ink reaches into it. The bound lies between a blur of
+  // 0.6 and 0.85 units (the pixel's own size adds to the blur the stroke shows).
   std::mt19937_64 rng(11);
   for (const int n : {3, 4, 6})
     for (const double pixels : {50.0, 90.0, 200.0})
-      for (const double defocus : {0.0, 1.2}) {
+      for (const double defocus : {0.0, 1.2, 2.4}) {
         Look look;
         look.defocus = defocus;
         const RenderedMarker r = render_marker(kCamera, n, pixels * (n + 1) / 4, look, rng);
         const BorderEdges edges =
             border_edges(ImageView(r.image), kCamera, r.marker.family, r.homography, r.marker.tag_size);
-        if (defocus / (pixels / 24) > 0.5) {
+        const double blur = defocus / (pixels / 24);  // units
+        if (blur > 0.85) {
           EXPECT_TRUE(edges.points.empty() && edges.sides.empty()) << n << "x" << n << " " << pixels << " px";
           continue;
         }
+        if (blur > 0.6) continue;
         const std::vector<double> d = offsets(r, edges);
-        const int sampled = 4 * std::min(16, r.marker.family.side() - 5);
+        const int sampled = 4 * std::min(16, r.marker.family.side() - 7);
         EXPECT_GE(int(d.size()), sampled * 9 / 10) << n << "x" << n << " " << pixels << " px";
         for (const double v : d) EXPECT_LT(std::abs(v), 0.15) << n << "x" << n << " " << pixels << " px";
         EXPECT_LT(std::abs(median(d)), 0.02) << n << "x" << n << " " << pixels << " px";
@@ -106,6 +109,27 @@ TEST(BorderEdges, AToneCurveUnderDefocusDoesNotMoveThem) {
       ASSERT_GT(d.size(), 40u) << gamma;
       EXPECT_LT(std::abs(median(d)), 0.03) << "gamma " << gamma;
     }
+}
+
+TEST(BorderEdges, TheSquaresBlurredInDoNotPullTheStrokeInwards) {
+  // 3x3 markers of 4 px a unit on a six-unit margin, defocused by half a unit: the
+  // squares two units inside the stroke darken the paper beside it, a margin this wide
+  // does not. The centroid of the whole profile (a unit of paper either side) put these
+  // markers' points 0.0045 to 0.009 units inwards on average; the window centred on the
+  // stroke keeps each marker's mean within 0.002 units.
+  std::mt19937_64 rng(23);
+  for (int k = 0; k < 12; ++k) {
+    Look look;
+    look.defocus = 2, look.margin_units = 6;
+    const RenderedMarker r = render_marker(kCamera, 3, 96, look, rng);
+    const BorderEdges edges =
+        border_edges(ImageView(r.image), kCamera, r.marker.family, r.homography, r.marker.tag_size);
+    const std::vector<double> d = offsets(r, edges);
+    ASSERT_GT(d.size(), 40u) << k;
+    double mean = 0;
+    for (const double v : d) mean += v / 4;
+    EXPECT_LT(std::abs(mean / double(d.size())), 0.002) << k;
+  }
 }
 
 TEST(BorderEdges, NoneWithoutAWhiteMarginOrForASmallMarker) {
