@@ -681,8 +681,8 @@ struct BorderEdges {
 };
 // Points of the centre line of the black border of a marker of `family` under
 // `homography` (units -> undistorted pixels), up to 16 a side; none when the marker has
-// under 1.25 pixels per unit or its stroke is blurred by more than about 0.45 units, and
-// none where the stroke has no white margin beside it.
+// under 1.25 pixels per unit or its stroke is blurred by more than about 0.6 to 0.8
+// units, and none where the stroke has no white margin beside it.
 BorderEdges border_edges(const ImageView& image, const Camera& camera, const Family& family,
                          const cv::Matx33d& homography, double tag_size);
 
