@@ -139,23 +139,6 @@ struct Clip {
   std::vector<std::vector<Motion>> motion;  // per frame and sheet (motion only)
 };
 
-// A sheet at the start or end of its motion (as in `video`): where its centre is seen, its
-// mean projected tag edge, its tilt about an axis across the line of sight and its roll.
-struct Placement {
-  cv::Point2d center;
-  double edge, tilt, tilt_axis, roll;
-};
-
-Placement between(const Placement& a, const Placement& b, double s) {
-  const double e = (1 - std::cos(CV_PI * s)) / 2;
-  auto mix = [e](double x, double y) { return x + (y - x) * e; };
-  return {{mix(a.center.x, b.center.x), mix(a.center.y, b.center.y)},
-          std::exp(mix(std::log(a.edge), std::log(b.edge))),
-          mix(a.tilt, b.tilt),
-          mix(a.tilt_axis, b.tilt_axis),
-          mix(a.roll, b.roll)};
-}
-
 // The pose of a placement, facing the camera along the line of sight through its image
 // point (through the lens distortion, if any), at the distance that gives its edge.
 Pose pose_of(const lftag::Camera& camera, const Placement& p) {

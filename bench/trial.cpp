@@ -18,6 +18,16 @@ Pose place(const lftag::Camera& camera, cv::Point2d center, double distance, con
   return {rvec, cv::Vec3d(x * distance, y * distance, distance)};
 }
 
+Placement between(const Placement& a, const Placement& b, double s) {
+  const double e = (1 - std::cos(CV_PI * s)) / 2;
+  auto mix = [e](double x, double y) { return x + (y - x) * e; };
+  return {{mix(a.center.x, b.center.x), mix(a.center.y, b.center.y)},
+          std::exp(mix(std::log(a.edge), std::log(b.edge))),
+          mix(a.tilt, b.tilt),
+          mix(a.tilt_axis, b.tilt_axis),
+          mix(a.roll, b.roll)};
+}
+
 Pose facing_pose(const lftag::Camera& camera, cv::Point2d center, double edge, double tilt, double tilt_axis,
                  double roll, double tag_size) {
   const auto rotation = [](const cv::Vec3d& axis_angle) {

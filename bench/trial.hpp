@@ -34,6 +34,18 @@ Pose place(const lftag::Camera& camera, cv::Point2d center, double distance, con
 Pose facing_pose(const lftag::Camera& camera, cv::Point2d center, double edge, double tilt, double tilt_axis,
                  double roll, double tag_size);
 
+// A sheet at the start or end of a motion across a clip (`video`, `field`): the image
+// point its centre is seen at, the mean projected edge of its tag, its tilt out of the
+// plane facing the camera (about an axis across the line of sight at `tilt_axis` degrees
+// in the image) and its roll.
+struct Placement {
+  cv::Point2d center;
+  double edge, tilt, tilt_axis, roll;  // pixels, degrees
+};
+
+// Eased from a (s = 0) to b (s = 1): the sheet starts and stops gently.
+Placement between(const Placement& a, const Placement& b, double s);
+
 // Degrees between the marker's normal and the line of sight to its centre.
 double tilt_from_sight_deg(const Pose& pose);
 

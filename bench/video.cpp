@@ -47,14 +47,6 @@ constexpr Plan kFull{24, 30}, kQuick{1, 10};
 const std::vector<double> kEdgeBins{30, 60, 100, 160, 220};  // pixels
 const std::vector<double> kTiltBins{0, 30, 45, 60};          // degrees
 
-// A sheet at the start or end of its motion: the image point its centre is seen at, the
-// mean projected edge of its tag, its tilt out of the plane facing the camera (about an
-// axis across the line of sight at `tilt_axis` degrees in the image) and its roll.
-struct Placement {
-  cv::Point2d center;
-  double edge, tilt, tilt_axis, roll;  // pixels, degrees
-};
-
 Placement random_placement(std::mt19937_64& rng, double edge) {
   return {{uniform(rng, 0, kFrameSize.width - 1), uniform(rng, 0, kFrameSize.height - 1)},
           edge,
@@ -74,17 +66,6 @@ Placement moved(const Placement& a, std::mt19937_64& rng) {
   b.tilt_axis += uniform(rng, -45, 45);
   b.roll += uniform(rng, -45, 45);
   return b;
-}
-
-// Eased from a (s = 0) to b (s = 1): the sheet starts and stops gently.
-Placement between(const Placement& a, const Placement& b, double s) {
-  const double e = (1 - std::cos(CV_PI * s)) / 2;
-  auto mix = [e](double x, double y) { return x + (y - x) * e; };
-  return {{mix(a.center.x, b.center.x), mix(a.center.y, b.center.y)},
-          std::exp(mix(std::log(a.edge), std::log(b.edge))),
-          mix(a.tilt, b.tilt),
-          mix(a.tilt_axis, b.tilt_axis),
-          mix(a.roll, b.roll)};
 }
 
 // The pose of a placement: facing the camera along the line of sight, tilted, rolled, at
