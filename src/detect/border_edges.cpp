@@ -26,10 +26,11 @@ namespace {
 constexpr double kReach = 1.0;
 constexpr double kStep = 0.5;    // pixels between the profile's samples,
 constexpr int kMaxSamples = 33;  // but no more than this many (an eighth of a unit apart)
-// Units of paper either side of the stroke in the window whose centroid is its centre
-// (see stroke_centre), and the window's moves towards it: at most kMaxShifts, until a
-// move is under kSettled units (2 to 4 moves on rendered strokes).
-constexpr double kPaperInWindow = 0.5;
+// Paper either side of the stroke in the window whose centroid is its centre (see
+// stroke_centre): half a unit, but at least a pixel and a half (the ramp of a sharp edge
+// sampled bilinearly spans two pixels) up to three quarters of a unit. And the window's
+// moves towards the centre: at most kMaxShifts, until a move is under kSettled units.
+constexpr double kPaperInWindow = 0.5, kPaperInWindowPixels = 1.5, kMostPaperInWindow = 0.75;
 constexpr int kMaxShifts = 8;
 constexpr double kSettled = 3e-4;
 // Units kept from the centre line's ends, where the crossing side's stroke lies across
@@ -47,10 +48,11 @@ constexpr double kPaperMismatch = 0.25;
 // of s units adds s^2, and the pixel's own size some more) above which the marker's
 // stroke is not used: blurred by more than about 0.6 to 0.8 units, the squares two units
 // inside reach the centre's window and move it inwards (on rendered 3x3 markers with a
-// six-unit margin 0.0012 to 0.0018 units at a blur of 0.6, 0.004 to 0.005 at 0.7,
-// 0.008 at 0.8). Chosen on the tuning sets of the field and video experiments among
-// 0.5, 0.6 and 0.65: the higher, the nearer the small markers' poses came (at 1080p
-// through H.264 and under 2 px a unit in the video), with no condition worse.
+// six-unit margin, 4 to 1.5 px a unit: 0.001 to 0.006 units at a blur of 0.6, 0.003 to
+// 0.010 at 0.7). Chosen on the tuning sets of the field and video experiments among
+// 0.5, 0.6 and 0.65 (with half a unit of paper in every window): the higher, the nearer
+// the small markers' poses came (at 1080p through H.264 and under 2 px a unit in the
+// video), with no condition worse.
 constexpr double kMaxSpread = 0.65;
 // Points further than this many times the side's RMS distance from its line are dropped.
 constexpr double kOutlier = 3;
@@ -114,13 +116,17 @@ struct Found {
 // takes the darker background, blurred in past a narrow margin, for paper, and moves the
 // centre inwards (0.01 px, a tenth of a percent of the distance, on 50 px markers
 // defocused by 1.2 px; BorderEdges.PointsLieOnTheStrokesCentreLine). The centre is the
-// ink's centroid in a window of the stroke and kPaperInWindow either side, centred on
-// it: a blurred stroke's tails, cut alike on both sides, do not move it, and the squares
-// two units inside reach the window only by a blur's far tail. (Over the whole profile
-// the squares' ink moves it inwards: by 0.018 units at a blur of 0.6 units, against
-// 0.0015 in the window, in a profile model with the squares two units in and a six-unit
-// margin.) False when the two ends are not paper alike (no white margin, a shadow's edge
-// along the border), no ink is found, or the centre leaves the profile's middle.
+// ink's centroid in a window of the stroke and some paper either side, centred on it: a
+// blurred stroke's tails, cut alike on both sides, do not move it, and the squares two
+// units inside reach the window only by a blur's far tail. (Over the whole profile the
+// squares' ink moves it inwards: by 0.018 units at a blur of 0.6 units, against 0.0015
+// in a window with half a unit of paper, in a profile model with the squares two units
+// in and a six-unit margin.) A window too tight for the pixels cuts a sharp edge's ramp
+// where the sampling puts it: on sharp markers of 2 px a unit, the 99th percentile of a
+// marker's median point offset was 0.016 px with half a unit of paper, 0.011 to 0.013
+// over the whole profile, 0.013 to 0.014 with a pixel and a half of paper. False when
+// the two ends are not paper alike (no white margin, a shadow's edge along the border),
+// no ink is found, or the centre leaves the profile's middle.
 bool stroke_centre(const ImageView& image, cv::Point2d outer, cv::Point2d inward, cv::Point2d& centre, double& ink,
                    double& spread) {
   const double unit = cv::norm(inward);
@@ -148,12 +154,13 @@ bool stroke_centre(const ImageView& image, cv::Point2d outer, cv::Point2d inward
   for (int i = 0; i < samples; ++i) second += dark[i] * (kFrom + i * step - mean) * (kFrom + i * step - mean);
   // The centre, from the predicted one: samples at the window's ends count in part, so
   // that the centroid moves smoothly with the window.
-  constexpr double kHalfWindow = 1 + kPaperInWindow;
-  double middle = std::clamp(mean, 1 - (kReach - kPaperInWindow), 1 + (kReach - kPaperInWindow));
+  const double paper = std::clamp(kPaperInWindowPixels / unit, kPaperInWindow, kMostPaperInWindow);
+  const double half_window = 1 + paper;
+  double middle = std::clamp(mean, 1 - (kReach - paper), 1 + (kReach - paper));
   for (int shift = 0; shift < kMaxShifts; ++shift) {
     double weight = 0, weighted = 0;
     for (int i = 0; i < samples; ++i) {
-      const double at = kFrom + i * step, w = std::clamp((kHalfWindow - std::abs(at - middle)) / step + 0.5, 0.0, 1.0);
+      const double at = kFrom + i * step, w = std::clamp((half_window - std::abs(at - middle)) / step + 0.5, 0.0, 1.0);
       weight += w * dark[i], weighted += w * dark[i] * at;
     }
     if (!(weight > 0)) return false;
@@ -161,7 +168,7 @@ bool stroke_centre(const ImageView& image, cv::Point2d outer, cv::Point2d inward
     middle += moved;
     if (std::abs(moved) < kSettled) break;
   }
-  if (!(std::abs(middle - 1) <= kReach - kPaperInWindow)) return false;
+  if (!(std::abs(middle - 1) <= kReach - paper)) return false;
   centre = outer + inward * middle;
   ink = sum * step;
   spread = second / sum;
