@@ -152,8 +152,8 @@ bool stroke_centre(const ImageView& image, cv::Point2d outer, cv::Point2d inward
   const double mean = moment / sum;
   double second = 0;
   for (int i = 0; i < samples; ++i) second += dark[i] * (kFrom + i * step - mean) * (kFrom + i * step - mean);
-  // The centre, from the predicted one: samples at the window's ends count in part, so
-  // that the centroid moves smoothly with the window.
+  // The centre, from the whole profile's centroid: samples at the window's ends count in
+  // part, so that the centroid moves smoothly with the window.
   const double paper = std::clamp(kPaperInWindowPixels / unit, kPaperInWindow, kMostPaperInWindow);
   const double half_window = 1 + paper;
   double middle = std::clamp(mean, 1 - (kReach - paper), 1 + (kReach - paper));
