@@ -82,7 +82,7 @@ double perspective_free_ink_ratio(std::vector<Blob>& blobs) {
 }  // namespace
 
 Blob BlobMeasurer::measure(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary,
-                           int reach, const PaperLevel& paper) {
+                           int reach, const PaperLevel& paper, cv::Point2d* flat_centroid) {
   // The blob's window: its box grown by `reach`. In it, each pixel is the blob's own,
   // another black region's, or white; a white pixel counts for the blob when the nearest
   // black pixel within `reach` is the blob's (ties count half). So the anti-aliased edge
@@ -137,7 +137,8 @@ Blob BlobMeasurer::measure(const RegionTree& tree, int region, const ImageView& 
       o[x] = std::uint8_t(std::min<int>(o[x], dow)), t[x] = std::uint8_t(std::min<int>(t[x], dot));
     }
   }
-  double m = 0, mx = 0, my = 0;
+  const bool flat = flat_centroid != nullptr;
+  double m = 0, mx = 0, my = 0, fm = 0, fmx = 0, fmy = 0;
   for (int y = y0; y <= y1; ++y) {
     const std::uint8_t* row = image.data + y * image.stride;
     const std::uint8_t* c = cls.data() + std::size_t(y - cy0) * w;
@@ -157,6 +158,9 @@ Blob BlobMeasurer::measure(const RegionTree& tree, int region, const ImageView& 
       if (share == 0) continue;
       const double wgt = share * paper.ink(x, y, row[x]);
       m += wgt, mx += wgt * x, my += wgt * y;
+      if (!flat) continue;
+      const double fwgt = share * std::max(0.0, paper.level - row[x]);
+      fm += fwgt, fmx += fwgt * x, fmy += fwgt * y;
     }
   }
 
@@ -164,7 +168,9 @@ Blob BlobMeasurer::measure(const RegionTree& tree, int region, const ImageView& 
   b.region = region;
   b.area = r.area;
   b.mass = m;
-  b.centroid = m > 0 ? cv::Point2d(mx / m, my / m) : cv::Point2d((r.x0 + r.x1) / 2.0, (r.y0 + r.y1) / 2.0);
+  const cv::Point2d middle((r.x0 + r.x1) / 2.0, (r.y0 + r.y1) / 2.0);
+  b.centroid = m > 0 ? cv::Point2d(mx / m, my / m) : middle;
+  if (flat) *flat_centroid = fm > 0 ? cv::Point2d(fmx / fm, fmy / fm) : middle;
   return b;
 }
 
@@ -333,11 +339,11 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
       c.paper.local.release();  // the pose reads the frame, not the enlarged patch
     bool straddles = false;     // a square across a shadow's edge (kMaxPaperShift)
     for (int j = 0; j < n2; ++j) {
-      Blob b = measurer.measure(tree, k[j], image, binary, reach, paper);
+      cv::Point2d flat;  // the centroid against the one level, where the paper level follows the light
+      Blob b = measurer.measure(tree, k[j], image, binary, reach, paper, paper.local.empty() ? nullptr : &flat);
       if (!paper.local.empty()) {
-        const Blob flat = measurer.measure(tree, k[j], image, binary, reach, PaperLevel(paper.level));
         const double unit = std::sqrt(double(b.area)) / 3;
-        straddles = straddles || cv::norm(b.centroid - flat.centroid) > kMaxPaperShift * unit;
+        straddles = straddles || cv::norm(b.centroid - flat) > kMaxPaperShift * unit;
       }
       b.centroid = patch.to_frame(b.centroid);
       b.mass *= pixel_area;

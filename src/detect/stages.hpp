@@ -305,8 +305,9 @@ class BlobMeasurer {
   // Centroid of the inverted grey image over `region` with its holes and the white pixels
   // within `reach` pixels of it that are nearer to it than to any other black pixel.
   // `paper` is the grey level that weighs zero (255 for the paper's plain inversion).
+  // With `flat_centroid`, the centroid against paper.level alone as well, in the same pass.
   Blob measure(const RegionTree& tree, int region, const ImageView& image, const BinaryImage& binary, int reach,
-               const PaperLevel& paper);
+               const PaperLevel& paper, cv::Point2d* flat_centroid = nullptr);
 
  private:
   std::vector<std::uint8_t> classes_, to_own_, to_other_;  // per pixel of the blob's window
