@@ -34,32 +34,21 @@ bool run_angle(const Options& options) {
                 {"system", "family", "distance_m", "angle_deg", "markers", "found", "wrong"});
   Csv summary_csv(options.out / "angle_summary.csv", {"system", "family", "distance_m", "markers", "first_missed_deg",
                                                       "missed20_deg", "last_found_deg", "wrong"});
-  const int n = int(options.systems.size());
-  std::vector<std::unique_ptr<FiducialSystem>> systems(n);
-  std::vector<std::vector<Step>> results(n);
-  parallel_for(n, options.threads, [&](int s, int) {
-    systems[s] = make_system(options.systems[s]);
-    FiducialSystem& system = *systems[s];
-    system.set_camera(camera, 1.0);
-    const std::vector<std::string> ids = system.marker_ids(plan.markers, options.seed);
-    results[s] = sweep(
-        angles, int(ids.size()),
-        [&](int step, int m) {
-          std::mt19937_64 rng = seeded(options.seed, {0xa691e, std::uint64_t(step), std::uint64_t(m)});
-          const double roll = std::uniform_real_distribution<double>(0, 360)(rng);
-          const cv::Vec3d rvec = lftag::rotation_from_angles(roll, angles[step], 0);
-          const Pose pose = place(camera, jittered_center(camera, rng), kDistance, rvec);
-          return run_trial(system, renderer, ids[m], 1.0, pose);
-        },
-        after_empty_steps(plan.empty_steps));
-    progress("angle: " + system.name() + " done");
-  });
-  for (int s = 0; s < n; ++s) {
-    const FiducialSystem& system = *systems[s];
-    for (const Step& st : results[s])
+  const std::vector<SystemSweep> swept =
+      sweep_systems(options.systems, options.threads, options.seed, "angle", camera, angles, plan.markers,
+                    plan.empty_steps, [&](FiducialSystem& system, const std::string& id, int step, int m) {
+                      std::mt19937_64 rng = seeded(options.seed, {0xa691e, std::uint64_t(step), std::uint64_t(m)});
+                      const double roll = std::uniform_real_distribution<double>(0, 360)(rng);
+                      const cv::Vec3d rvec = lftag::rotation_from_angles(roll, angles[step], 0);
+                      const Pose pose = place(camera, jittered_center(camera, rng), kDistance, rvec);
+                      return run_trial(system, renderer, id, 1.0, pose);
+                    });
+  for (const SystemSweep& sw : swept) {
+    const FiducialSystem& system = *sw.system;
+    for (const Step& st : sw.steps)
       steps_csv.row(system.name(), system.family(), kDistance, st.value, st.markers, st.found, st.wrong);
-    const Limits l = limits(results[s]);
-    summary_csv.row(system.name(), system.family(), kDistance, results[s].front().markers, l.first_missed, l.missed20,
+    const Limits l = limits(sw.steps);
+    summary_csv.row(system.name(), system.family(), kDistance, sw.steps.front().markers, l.first_missed, l.missed20,
                     l.last_found, l.wrong);
   }
   return true;

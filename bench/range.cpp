@@ -35,40 +35,29 @@ bool run_range(const Options& options) {
                 {"system", "family", "dictionary_size", "distance_m", "edge_px", "markers", "found", "wrong"});
   Csv summary_csv(options.out / "range_summary.csv", {"system", "family", "dictionary_size", "markers",
                                                       "first_missed_m", "missed20_m", "last_found_m", "wrong"});
-  const int n = int(options.systems.size());
-  std::vector<std::unique_ptr<FiducialSystem>> systems(n);
-  std::vector<std::vector<Step>> results(n);
-  parallel_for(n, options.threads, [&](int s, int) {
-    systems[s] = make_system(options.systems[s]);
-    FiducialSystem& system = *systems[s];
-    system.set_camera(camera, 1.0);
-    const std::vector<std::string> ids = system.marker_ids(plan.markers, options.seed);
-    results[s] = sweep(
-        distances, int(ids.size()),
-        [&](int step, int m) {
-          std::mt19937_64 rng = seeded(options.seed, {0x4a46e, std::uint64_t(step), std::uint64_t(m)});
-          const double roll = std::uniform_real_distribution<double>(0, 360)(rng);
-          const cv::Vec3d rvec = lftag::rotation_from_angles(roll, 0, 0);
-          const Pose pose = place(camera, jittered_center(camera, rng), distances[step], rvec);
-          const std::filesystem::path missed =
-              options.save_misses.empty()
-                  ? std::filesystem::path()
-                  : options.save_misses /
-                        (system.name() + "-range-" + std::to_string(int(std::lround(distances[step] * 10))) +
-                         "dm-marker" + std::to_string(m) + ".png");
-          return run_trial(system, renderer, ids[m], 1.0, pose, missed);
-        },
-        after_empty_steps(plan.empty_steps));
-    progress("range: " + system.name() + " done");
-  });
-  for (int s = 0; s < n; ++s) {
-    const FiducialSystem& system = *systems[s];
-    for (const Step& st : results[s])
+  const std::vector<SystemSweep> swept =
+      sweep_systems(options.systems, options.threads, options.seed, "range", camera, distances, plan.markers,
+                    plan.empty_steps, [&](FiducialSystem& system, const std::string& id, int step, int m) {
+                      std::mt19937_64 rng = seeded(options.seed, {0x4a46e, std::uint64_t(step), std::uint64_t(m)});
+                      const double roll = std::uniform_real_distribution<double>(0, 360)(rng);
+                      const cv::Vec3d rvec = lftag::rotation_from_angles(roll, 0, 0);
+                      const Pose pose = place(camera, jittered_center(camera, rng), distances[step], rvec);
+                      const std::filesystem::path missed =
+                          options.save_misses.empty()
+                              ? std::filesystem::path()
+                              : options.save_misses / (system.name() + "-range-" +
+                                                       std::to_string(int(std::lround(distances[step] * 10))) +
+                                                       "dm-marker" + std::to_string(m) + ".png");
+                      return run_trial(system, renderer, id, 1.0, pose, missed);
+                    });
+  for (const SystemSweep& sw : swept) {
+    const FiducialSystem& system = *sw.system;
+    for (const Step& st : sw.steps)
       steps_csv.row(system.name(), system.family(), system.dictionary_size(), st.value, camera.fx / st.value,
                     st.markers, st.found, st.wrong);
-    const Limits l = limits(results[s]);
-    summary_csv.row(system.name(), system.family(), system.dictionary_size(), results[s].front().markers,
-                    l.first_missed, l.missed20, l.last_found, l.wrong);
+    const Limits l = limits(sw.steps);
+    summary_csv.row(system.name(), system.family(), system.dictionary_size(), sw.steps.front().markers, l.first_missed,
+                    l.missed20, l.last_found, l.wrong);
   }
   return true;
 }

@@ -6,7 +6,9 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "experiment.hpp"
 #include "lftag/tracker.hpp"  // rotation_angle
+#include "systems.hpp"
 
 namespace bench {
 
@@ -157,6 +159,25 @@ std::function<bool(const std::vector<Step>&)> after_empty_steps(int count) {
     if (int(steps.size()) < count) return false;
     return std::all_of(steps.end() - count, steps.end(), [](const Step& s) { return s.found == 0; });
   };
+}
+
+std::vector<SystemSweep> sweep_systems(
+    const std::vector<std::string>& names, int threads, std::uint64_t seed, const std::string& experiment,
+    const lftag::Camera& camera, const std::vector<double>& values, int markers, int empty_steps,
+    const std::function<Outcome(FiducialSystem&, const std::string&, int, int)>& trial) {
+  std::vector<SystemSweep> out(names.size());
+  parallel_for(int(names.size()), threads, [&](int s, int) {
+    SystemSweep& sw = out[std::size_t(s)];
+    sw.system = make_system(names[std::size_t(s)]);
+    FiducialSystem& system = *sw.system;
+    system.set_camera(camera, 1.0);
+    const std::vector<std::string> ids = system.marker_ids(markers, seed);
+    sw.steps = sweep(
+        values, int(ids.size()), [&](int step, int m) { return trial(system, ids[std::size_t(m)], step, m); },
+        after_empty_steps(empty_steps));
+    progress(experiment + ": " + system.name() + " done");
+  });
+  return out;
 }
 
 Limits limits(const std::vector<Step>& steps) {

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
@@ -113,6 +114,21 @@ std::vector<Step> sweep(const std::vector<double>& values, int markers,
 
 // Stop rule: `count` consecutive steps found nothing.
 std::function<bool(const std::vector<Step>&)> after_empty_steps(int count);
+
+// A system and its sweep.
+struct SystemSweep {
+  std::unique_ptr<FiducialSystem> system;
+  std::vector<Step> steps;
+};
+
+// Every system of `names`, one to a worker (`threads`), made for `camera` with 1 m
+// markers and swept over `values` with `markers` of its ids (of `seed`) until
+// `empty_steps` steps found nothing: trial(system, id, step, marker). `experiment`
+// names the progress lines.
+std::vector<SystemSweep> sweep_systems(
+    const std::vector<std::string>& names, int threads, std::uint64_t seed, const std::string& experiment,
+    const lftag::Camera& camera, const std::vector<double>& values, int markers, int empty_steps,
+    const std::function<Outcome(FiducialSystem& system, const std::string& id, int step, int marker)>& trial);
 
 // What a sweep reached: the first value at which a marker was missed, the first at which
 // 20 % or more were missed, the last at which any was found, and all wrong detections.
