@@ -22,7 +22,6 @@
 #include <chrono>
 #include <cmath>
 #include <map>
-#include <mutex>
 #include <numeric>
 #include <optional>
 #include <tuple>
@@ -353,7 +352,6 @@ bool run_tracking(const Options& options) {
   // [system][(source, set, condition)]
   using Key = std::tuple<std::string, std::string, std::string>;
   std::vector<std::map<Key, Tally>> tallies(n);
-  std::mutex mutex;
   const std::pair<const char*, std::unique_ptr<ClipSource>> sources[] = {
       {"video", video_clips(options)},
       {"field", options.quick ? field_clips(options, kQuickFieldClips, kQuickFieldFrames)
@@ -362,22 +360,26 @@ bool run_tracking(const Options& options) {
     // Not a structured binding: C++17 lets no lambda capture one (clang refuses).
     const std::string source_label = named.first;
     ClipSource* const source = named.second.get();
-    int done = 0;
-    parallel_for(source->size(), threads, [&](int c, int worker) {
-      const RenderedClip clip = source->render(c, workers[std::size_t(worker)]);
-      std::vector<Tally> clip_tallies;
-      for (int s = 0; s < n; ++s)
-        clip_tallies.push_back(run_clip(*workers[std::size_t(worker)][std::size_t(s)], clip, s));
-      std::lock_guard<std::mutex> lock(mutex);
-      for (int s = 0; s < n; ++s) {
-        tallies[s][{source_label, clip.set, "all"}].append(clip_tallies[std::size_t(s)]);
-        if (source_label == "field")
-          tallies[s][{source_label, clip.set, clip.condition}].append(clip_tallies[std::size_t(s)]);
-      }
-      if (++done % 10 == 0 || done == source->size())
+    // A batch of clips rendered on every worker, then tracked and timed on this thread
+    // alone, as the field experiment times its frames: a frame timed beside another
+    // worker's rendering (H.264 coding runs threads of its own) is slowed by it.
+    for (int first = 0; first < source->size(); first += threads) {
+      const int count = std::min(threads, source->size() - first);
+      std::vector<RenderedClip> batch(static_cast<std::size_t>(count));
+      parallel_for(count, threads, [&](int k, int worker) {
+        batch[std::size_t(k)] = source->render(first + k, workers[std::size_t(worker)]);
+      });
+      for (const RenderedClip& clip : batch)
+        for (int s = 0; s < n; ++s) {
+          const Tally tally = run_clip(*workers[0][std::size_t(s)], clip, s);
+          tallies[s][{source_label, clip.set, "all"}].append(tally);
+          if (source_label == "field") tallies[s][{source_label, clip.set, clip.condition}].append(tally);
+        }
+      const int done = first + count;
+      if (done % 10 < count || done == source->size())
         progress("tracking: " + source_label + " " + std::to_string(done) + " / " + std::to_string(source->size()) +
                  " clips");
-    });
+    }
   }
 
   Csv summary(options.out / "tracking_summary.csv", {"system",
