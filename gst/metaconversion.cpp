@@ -86,6 +86,18 @@ void set_identity(GstStructure* s, const Family& family, TagId id) {
   gst_structure_set(s, LFTAG_FIELD_ID_STRING, G_TYPE_STRING, id.to_decimal().c_str(), nullptr);
 }
 
+// The fields a detection and a marker's truth share: which marker, where and how posed.
+template <class Marker>
+void set_marker(GstStructure* s, const Marker& m) {
+  set_identity(s, m.family, m.id);
+  set_points(s, LFTAG_FIELD_KEYPOINTS, m.keypoints);
+  set_points(s, LFTAG_FIELD_CENTROIDS, m.centroids);
+  set_points(s, LFTAG_FIELD_CORNERS, m.corners);
+  set_point(s, LFTAG_FIELD_CENTER, m.center);
+  set_vec3(s, LFTAG_FIELD_RVEC, m.rvec);
+  set_vec3(s, LFTAG_FIELD_TVEC, m.tvec);
+}
+
 // ---- reading
 
 [[noreturn]] void malformed(const GstStructure* s, const char* field, const char* expected) {
@@ -298,13 +310,7 @@ const GstMetaInfo* truth_meta_info() {
 
 GstStructure* detection_structure(const Detection& d, const TrackInfo* track) {
   GstStructure* s = gst_structure_new_empty(LFTAG_DETECTION_STRUCTURE_NAME);
-  set_identity(s, d.family, d.id);
-  set_points(s, LFTAG_FIELD_KEYPOINTS, d.keypoints);
-  set_points(s, LFTAG_FIELD_CENTROIDS, d.centroids);
-  set_points(s, LFTAG_FIELD_CORNERS, d.corners);
-  set_point(s, LFTAG_FIELD_CENTER, d.center);
-  set_vec3(s, LFTAG_FIELD_RVEC, d.rvec);
-  set_vec3(s, LFTAG_FIELD_TVEC, d.tvec);
+  set_marker(s, d);
   gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, d.tag_size, LFTAG_FIELD_CALIBRATED, G_TYPE_BOOLEAN,
                     gboolean(d.calibrated), LFTAG_FIELD_DECODE_ERROR, G_TYPE_DOUBLE, d.decode_error,
                     LFTAG_FIELD_WORST_CELL, G_TYPE_DOUBLE, d.worst_cell, LFTAG_FIELD_NOISE_MARGIN, G_TYPE_DOUBLE,
@@ -330,13 +336,7 @@ GstStructure* detection_structure(const Detection& d, const TrackInfo* track) {
 
 GstStructure* truth_structure(const MarkerTruth& t) {
   GstStructure* s = gst_structure_new_empty(LFTAG_TRUTH_STRUCTURE_NAME);
-  set_identity(s, t.family, t.id);
-  set_points(s, LFTAG_FIELD_KEYPOINTS, t.keypoints);
-  set_points(s, LFTAG_FIELD_CENTROIDS, t.centroids);
-  set_points(s, LFTAG_FIELD_CORNERS, t.corners);
-  set_point(s, LFTAG_FIELD_CENTER, t.center);
-  set_vec3(s, LFTAG_FIELD_RVEC, t.rvec);
-  set_vec3(s, LFTAG_FIELD_TVEC, t.tvec);
+  set_marker(s, t);
   set_points(s, LFTAG_FIELD_CENTERS, t.centers);
   gst_structure_set(s, LFTAG_FIELD_TAG_SIZE, G_TYPE_DOUBLE, t.tag_size, LFTAG_FIELD_FULLY_VISIBLE, G_TYPE_BOOLEAN,
                     gboolean(t.fully_visible), LFTAG_FIELD_EDGE_PX, G_TYPE_DOUBLE, t.edge_px, nullptr);
