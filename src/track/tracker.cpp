@@ -185,6 +185,18 @@ Tracker::Track Tracker::new_track(const Detection& d, double time) {
   return t;
 }
 
+// The outline moved on at the rate its corners moved over the track's history, or the
+// last detection's when there is no motion to go by.
+std::array<cv::Point2d, 4> Tracker::predicted_corners(const Track& track, double time) {
+  const Sample& newest = track.history.back();
+  const Sample& oldest = track.history.front();
+  const double span = newest.time - oldest.time, dt = time - newest.time;
+  if (track.history.size() < 2 || !(span > 0) || dt == 0) return track.last.corners;
+  std::array<cv::Point2d, 4> corners;
+  for (int k = 0; k < 4; ++k) corners[k] = newest.corners[k] + (newest.corners[k] - oldest.corners[k]) * (dt / span);
+  return corners;
+}
+
 TrackedMarker Tracker::predicted(const Track& track, double time) const {
   TrackedMarker out{track.last, track.info};
   out.track.time = time;
@@ -197,8 +209,7 @@ TrackedMarker Tracker::predicted(const Track& track, double time) const {
   if (track.history.size() < 2 || !(span > 0) || dt == 0) return out;
 
   Detection& d = out.detection;
-  std::array<cv::Point2d, 4> corners;
-  for (int k = 0; k < 4; ++k) corners[k] = newest.corners[k] + (newest.corners[k] - oldest.corners[k]) * (dt / span);
+  const std::array<cv::Point2d, 4> corners = predicted_corners(track, time);
   // The rest of the outline's points follow its corners (the last detection's points are
   // where its corners were: newest.corners).
   const std::vector<cv::Point2d> from(newest.corners.begin(), newest.corners.end()), to(corners.begin(), corners.end());
@@ -392,10 +403,7 @@ std::vector<TrackedMarker> Tracker::predict(double time) const {
 std::vector<ExpectedMarker> Tracker::expected(double time) const {
   std::vector<ExpectedMarker> out;
   if (started_ && time < last_time_) return out;
-  for (const Track& t : tracks_) {
-    const Detection d = predicted(t, time).detection;
-    out.push_back({d.family, d.id, d.corners});
-  }
+  for (const Track& t : tracks_) out.push_back({t.last.family, t.last.id, predicted_corners(t, time)});
   return out;
 }
 

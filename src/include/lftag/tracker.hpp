@@ -167,6 +167,7 @@ class Tracker {
   };
   Track new_track(const Detection& d, double time);
   TrackedMarker predicted(const Track& track, double time) const;
+  static std::array<cv::Point2d, 4> predicted_corners(const Track& track, double time);
   void smooth(Track& track, TrackedMarker& out);
   void choose_pose(Track& track, Detection& d, double time, bool& flipped) const;
 
