@@ -15,6 +15,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "../core/geometry.hpp"
+#include "../core/rotation.hpp"
 #include "stages.hpp"
 
 namespace lftag::detail {
@@ -22,7 +23,7 @@ namespace lftag::detail {
 std::vector<cv::Point2d> project_pinhole(const std::vector<cv::Point3d>& object, const cv::Vec3d& rvec,
                                          const cv::Vec3d& tvec, const cv::Matx33d& k) {
   cv::Matx33d r;
-  cv::Rodrigues(rvec, r);
+  cv::Rodrigues(rvec, r);  // as cv::projectPoints turns them, to the bit
   std::vector<cv::Point2d> out;
   out.reserve(object.size());
   for (const cv::Point3d& p : object) {
@@ -67,8 +68,7 @@ double rms_error(const std::vector<cv::Point3d>& object, const std::vector<cv::P
 double shape_misfit(const std::vector<double>& log_ink, const std::vector<bool>& baseline,
                     const std::vector<cv::Point3d>& object, const cv::Vec3d& rvec, const cv::Vec3d& tvec) {
   if (log_ink.empty()) return std::nan("");
-  cv::Matx33d r;
-  cv::Rodrigues(rvec, r);
+  const cv::Matx33d r = rotation_matrix(rvec);
   std::vector<double> residual;
   double sum[2] = {0, 0};
   int count[2] = {0, 0};
@@ -98,8 +98,7 @@ void refine_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::P
                  cv::Vec3d& rvec, cv::Vec3d& tvec, const std::vector<EdgePoint>& edges, double edge_weight) {
   using Matrix6 = Eigen::Matrix<double, 6, 6>;
   using Vector6 = Eigen::Matrix<double, 6, 1>;
-  cv::Matx33d r;
-  cv::Rodrigues(rvec, r);
+  cv::Matx33d r = rotation_matrix(rvec);
   // The squared error of (r, t), with the normal equations when asked.
   const std::size_t points = object.size() + (edge_weight > 0 ? edges.size() : 0);
   const auto evaluate = [&](const cv::Matx33d& r, const cv::Vec3d& t, Matrix6* h, Vector6* g) {
@@ -149,9 +148,7 @@ void refine_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::P
     damped.diagonal() *= 1 + lambda;
     const Vector6 step = damped.ldlt().solve(-g);
     if (!step.allFinite()) return;
-    cv::Matx33d turn;
-    cv::Rodrigues(cv::Vec3d(step[0], step[1], step[2]), turn);
-    const cv::Matx33d r_next = turn * r;
+    const cv::Matx33d r_next = rotation_matrix(cv::Vec3d(step[0], step[1], step[2])) * r;
     const cv::Vec3d t_next = tvec + cv::Vec3d(step[3], step[4], step[5]);
     const double next = evaluate(r_next, t_next, nullptr, nullptr);
     // A step below a ten-billionth of a radian and of the distance changes nothing a
@@ -167,7 +164,7 @@ void refine_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::P
       if (lambda > 1e12 || negligible) break;
     }
   }
-  cv::Rodrigues(r, rvec);
+  rvec = rotation_vector(r);
 }
 
 namespace {

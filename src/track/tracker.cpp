@@ -10,6 +10,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "../core/rotation.hpp"
+
 namespace lftag {
 namespace {
 
@@ -36,15 +38,9 @@ cv::Vec3d rotation_vector(cv::Vec4d q) {
 // The rotation `rvec` turned on for `dt` seconds at the rate it turned from `before` to
 // `after` over `span` seconds.
 cv::Vec3d extrapolate_rotation(const cv::Vec3d& before, const cv::Vec3d& after, double span, double dt) {
-  cv::Matx33d r0, r1, step;
-  cv::Rodrigues(before, r0);
-  cv::Rodrigues(after, r1);
-  cv::Vec3d w;
-  cv::Rodrigues(r1 * r0.t(), w);  // the turn over `span`, in the camera frame
-  cv::Rodrigues(cv::Vec3d(w * (dt / span)), step);
-  cv::Vec3d out;
-  cv::Rodrigues(step * r1, out);
-  return out;
+  const cv::Matx33d r0 = detail::rotation_matrix(before), r1 = detail::rotation_matrix(after);
+  const cv::Vec3d w = detail::rotation_vector(r1 * r0.t());  // the turn over `span`, in the camera frame
+  return detail::rotation_vector(detail::rotation_matrix(w * (dt / span)) * r1);
 }
 
 template <class Points>
@@ -81,10 +77,7 @@ double lead(double evidence, int chain, double margin) {
 }  // namespace
 
 double rotation_angle(const cv::Vec3d& a, const cv::Vec3d& b) {
-  cv::Matx33d ra, rb;
-  cv::Rodrigues(a, ra);
-  cv::Rodrigues(b, rb);
-  const cv::Matx33d r = ra.t() * rb;
+  const cv::Matx33d r = detail::rotation_matrix(a).t() * detail::rotation_matrix(b);
   return std::acos(std::clamp((r(0, 0) + r(1, 1) + r(2, 2) - 1) / 2, -1.0, 1.0));
 }
 
