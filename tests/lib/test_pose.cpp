@@ -12,6 +12,7 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include "../../src/core/rotation.hpp"
 #include "binary.hpp"
 #include "lftag/render.hpp"
 #include "scenes.hpp"
@@ -133,6 +134,29 @@ TEST(ProjectPinhole, IsWhatOpenCVProjectsWithoutDistortion) {
     for (std::size_t i = 0; i < got.size(); ++i) {
       EXPECT_EQ(got[i].x, expected[i].x) << "trial " << trial << " point " << i;
       EXPECT_EQ(got[i].y, expected[i].y) << "trial " << trial << " point " << i;
+    }
+  }
+}
+
+TEST(Rotation, TurnsAsOpenCVsRodriguesDoes) {
+  // Random turns, tiny ones and ones near half a turn (where the axis's sign is free, so
+  // the vectors are compared as the rotations they make).
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int trial = 0; trial < 300; ++trial) {
+    cv::Vec3d axis(u(rng), u(rng), u(rng));
+    axis *= 1 / cv::norm(axis);
+    const double angles[] = {0, 1e-17, 1e-9, std::abs(u(rng)) * CV_PI, CV_PI - 1e-9, CV_PI};
+    const cv::Vec3d rvec = axis * angles[trial % 6];
+    cv::Matx33d expected;
+    cv::Rodrigues(rvec, expected);
+    const cv::Matx33d got = detail::rotation_matrix(rvec);
+    EXPECT_LT(cv::norm(got - expected, cv::NORM_INF), 1e-14) << "trial " << trial;
+    cv::Matx33d back;
+    cv::Rodrigues(detail::rotation_vector(got), back);
+    EXPECT_LT(cv::norm(back - expected, cv::NORM_INF), 1e-12) << "trial " << trial;
+    if (angles[trial % 6] < CV_PI - 1e-6) {
+      EXPECT_LT(cv::norm(detail::rotation_vector(got) - rvec), 1e-12) << "trial " << trial;
     }
   }
 }
