@@ -7,6 +7,7 @@
 // residual wins.
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 
 #include <Eigen/Dense>
@@ -417,54 +418,87 @@ double digit_noise_margin(const Candidate& c, const CellCentres& design, const D
 // columns) away from the middle can land a whole unit from where a flat marker would put
 // it: read flat, that is the band shifted, another id (a 4x4 on a 0.15 to 0.4 m cylinder
 // in the field experiment was read so for three frames), or no id at all. A grid free to
-// bow models it: the reading's homography h plus a quadratic map of unit offsets b(u),
-// seen through h, so a square at u lies at h(u) + J_h(u) b(u), linear in b's 12
-// coefficients. With the homography's 8 parameters, 14 are fitted (b's constant and
-// linear terms move h's affine part). Below 4x4 a bow fits any one row's shift (three
-// rows): bowed grids are for 4x4 and larger.
-constexpr int kBowedParameters = 14;
-
+// bow models it: the reading's homography h plus a map b(u) of unit offsets, seen through
+// h, so a square at u lies at h(u) + J_h(u) b(u), linear in b's coefficients.
+// - From 4x4 the bow is free: b quadratic in u, 12 coefficients. With the homography's 8
+//   parameters, 14 are fitted (b's constant and linear terms move h's affine part).
+// - A 3x3 has three rows, and a free bow fits any one row's shift: its grid may only bend
+//   as a sheet does. b keeps its constant and linear terms (h's affine part refitted),
+//   and the squares leave the sheet's tangent plane by a depth z(u) quadratic in u (a
+//   cylinder of any axis, or a dome): a square at u moves along the image of the sheet's
+//   normal, by z(u). 3 parameters beyond the homography's 8; a row shifted a unit is no
+//   depth the sheet can take, unless the view is so oblique that the normal's image runs
+//   along the rows, and then the rival fits as well and the margin refuses the reading.
 struct Bow {
   cv::Matx33d h;
-  cv::Mat coefficients;  // 12 x 1: b's x terms, then its y terms
+  bool sheet = false;
+  cv::Vec3d normal;      // sheet: the homogeneous image of a unit step along the sheet's normal
+  cv::Mat coefficients;  // 12 x 1 (free: b's x terms, then its y terms) or 9 x 1 (sheet)
   double misfit = 0;     // squared pixels, over the blobs fitted
 };
 
-std::array<double, 6> bow_terms(const Family& f, cv::Point2d u) {
+// Parameters fitted in all, with the homography's.
+int bow_parameters(bool sheet) { return sheet ? 11 : 14; }
+
+// A bow of shape `sheet` under h, not yet fitted. The sheet's normal needs the camera: h
+// maps units to ideal pixels, so K^-1 h holds the sheet's axes (scaled alike).
+Bow unfitted_bow(const Family& f, const cv::Matx33d& h, const Camera& camera) {
+  Bow bow;
+  bow.h = h;
+  bow.sheet = f.n() < 4;
+  if (bow.sheet) {
+    const cv::Matx33d k = camera.matrix(), axes = k.inv() * h;
+    const cv::Vec3d x(axes(0, 0), axes(1, 0), axes(2, 0)), y(axes(0, 1), axes(1, 1), axes(2, 1));
+    const cv::Vec3d normal = x.cross(y);
+    const double length = cv::norm(normal);
+    // Scaled so that z is in units, as u is.
+    bow.normal = length > 0 ? k * (normal * (cv::norm(x) / length)) : cv::Vec3d(0, 0, 0);
+  }
+  return bow;
+}
+
+// The pixel shift at unit point u that each of the bow's coefficients makes, per unit.
+std::vector<cv::Vec2d> bow_columns(const Family& f, const Bow& bow, cv::Point2d u) {
   const double x = u.x / f.side() - 0.5, y = u.y / f.side() - 0.5;
-  return {1, x, y, x * x, x * y, y * y};
+  const std::array<double, 6> t = {1, x, y, x * x, x * y, y * y};
+  const cv::Matx22d j = units_to_pixels(bow.h, u);
+  const cv::Vec2d along_x(j(0, 0), j(1, 0)), along_y(j(0, 1), j(1, 1));
+  const int terms = bow.sheet ? 3 : 6;
+  std::vector<cv::Vec2d> columns;
+  for (int k = 0; k < terms; ++k) columns.push_back(along_x * t[k]);
+  for (int k = 0; k < terms; ++k) columns.push_back(along_y * t[k]);
+  if (bow.sheet) {
+    const cv::Vec3d q = bow.h * cv::Vec3d(u.x, u.y, 1.0);
+    const cv::Vec2d deeper((bow.normal[0] - q[0] / q[2] * bow.normal[2]) / q[2],
+                           (bow.normal[1] - q[1] / q[2] * bow.normal[2]) / q[2]);
+    for (int k = 3; k < 6; ++k) columns.push_back(deeper * (t[k] * f.side()));
+  }
+  return columns;
 }
 
 // The bow under h that puts the squares at `units` (grid order) nearest their blobs.
-Bow fit_bow(const Candidate& c, const cv::Matx33d& h, const std::vector<int>& blob_of_cell,
-            const std::vector<cv::Point2d>& units) {
-  const int cells = c.family.cell_count();
-  cv::Mat terms(2 * cells, 12, CV_64F, 0.0), offsets(2 * cells, 1, CV_64F);
+Bow fit_bow(const Candidate& c, Bow bow, const std::vector<int>& blob_of_cell, const std::vector<cv::Point2d>& units) {
+  const int cells = c.family.cell_count(), terms = bow.sheet ? 9 : 12;
+  cv::Mat columns(2 * cells, terms, CV_64F, 0.0), offsets(2 * cells, 1, CV_64F);
   for (int g = 0; g < cells; ++g) {
-    const std::array<double, 6> t = bow_terms(c.family, units[g]);
-    const cv::Matx22d j = units_to_pixels(h, units[g]);
-    const cv::Point2d off = c.blobs[blob_of_cell[g]].point - apply(h, units[g]);
-    for (int k = 0; k < 6; ++k)
-      for (int r = 0; r < 2; ++r) {
-        terms.at<double>(2 * g + r, k) = j(r, 0) * t[k];
-        terms.at<double>(2 * g + r, 6 + k) = j(r, 1) * t[k];
-      }
+    const std::vector<cv::Vec2d> shifts = bow_columns(c.family, bow, units[g]);
+    const cv::Point2d off = c.blobs[blob_of_cell[g]].point - apply(bow.h, units[g]);
+    for (int k = 0; k < terms; ++k)
+      columns.at<double>(2 * g, k) = shifts[k][0], columns.at<double>(2 * g + 1, k) = shifts[k][1];
     offsets.at<double>(2 * g, 0) = off.x, offsets.at<double>(2 * g + 1, 0) = off.y;
   }
-  Bow bow;
-  bow.h = h;
-  cv::solve(terms, offsets, bow.coefficients, cv::DECOMP_QR);
-  const cv::Mat error = terms * bow.coefficients - offsets;
+  cv::solve(columns, offsets, bow.coefficients, cv::DECOMP_QR);
+  const cv::Mat error = columns * bow.coefficients - offsets;
   bow.misfit = error.dot(error);
   return bow;
 }
 
 cv::Point2d bowed(const Family& f, const Bow& bow, cv::Point2d u) {
-  const std::array<double, 6> t = bow_terms(f, u);
-  cv::Vec2d b(0, 0);
-  for (int k = 0; k < 6; ++k) b += cv::Vec2d(bow.coefficients.at<double>(k), bow.coefficients.at<double>(6 + k)) * t[k];
-  const cv::Vec2d p = units_to_pixels(bow.h, u) * b;
-  return apply(bow.h, u) + cv::Point2d(p[0], p[1]);
+  const std::vector<cv::Vec2d> shifts = bow_columns(f, bow, u);
+  cv::Point2d p = apply(bow.h, u);
+  for (std::size_t k = 0; k < shifts.size(); ++k)
+    p += cv::Point2d(shifts[k][0], shifts[k][1]) * bow.coefficients.at<double>(int(k));
+  return p;
 }
 
 std::vector<cv::Point2d> units_of(const Family& f, const CellCentres& design, TagId id) {
@@ -478,17 +512,19 @@ std::vector<cv::Point2d> units_of(const Family& f, const CellCentres& design, Ta
 // square), of half the root of how much worse the rival fits, refitted, over the scatter
 // about the bowed grid (at least 0.02 px): a digit's margin, measured with the bow refitted
 // for each rival so that it cannot take up the square's own error. A band moves only when
-// all its squares can move the same way; rows holding a baseline cannot. Infinity below 4x4.
-double bowed_noise_margin(const Candidate& c, const CellCentres& design, const Decoding& d, bool digits) {
+// all its squares can move the same way; rows holding a baseline cannot.
+double bowed_noise_margin(const Candidate& c, const CellCentres& design, const Decoding& d, const Camera& camera,
+                          bool digits) {
   const Family& f = c.family;
-  const int n = f.n(), freedom = 2 * f.cell_count() - kBowedParameters;
-  if (n < 4 || freedom <= 0) return std::numeric_limits<double>::infinity();
+  const Bow shape = unfitted_bow(f, d.homography, camera);
+  const int n = f.n(), freedom = 2 * f.cell_count() - bow_parameters(shape.sheet);
+  if (freedom <= 0) return 0;
   const std::vector<cv::Point2d> units = units_of(f, design, d.id);
-  const double own = fit_bow(c, d.homography, d.blob_of_cell, units).misfit;
+  const double own = fit_bow(c, shape, d.blob_of_cell, units).misfit;
   const double spread = std::max(std::sqrt(own / freedom), 0.02);
   double least = std::numeric_limits<double>::infinity();
   const auto consider = [&](const std::vector<cv::Point2d>& rival) {
-    const double worse = fit_bow(c, d.homography, d.blob_of_cell, rival).misfit - own;
+    const double worse = fit_bow(c, shape, d.blob_of_cell, rival).misfit - own;
     least = std::min(least, std::sqrt(std::max(worse, 0.0)) / (2 * spread));
   };
   // Bands of rows (along y, bit 0) and of columns (along x, bit 1): lines [first, last].
@@ -532,10 +568,11 @@ double bowed_noise_margin(const Candidate& c, const CellCentres& design, const D
 // nearest its blob under the bow fitted to the id, until the id holds (three rounds at
 // most). Fills the id, worst_cell (units) and returns the bow's misfit; none when the id
 // never settled.
-std::optional<double> read_bowed(const Candidate& c, const CellCentres& design, Decoding& d) {
+std::optional<double> read_bowed(const Candidate& c, const CellCentres& design, const Camera& camera, Decoding& d) {
   const Family& f = c.family;
+  const Bow shape = unfitted_bow(f, d.homography, camera);
   for (int round = 0; round < 3; ++round) {
-    const Bow bow = fit_bow(c, d.homography, d.blob_of_cell, units_of(f, design, d.id));
+    const Bow bow = fit_bow(c, shape, d.blob_of_cell, units_of(f, design, d.id));
     TagId id;
     double worst = 0;
     for (int g = 0; g < f.cell_count(); ++g) {
@@ -558,6 +595,73 @@ std::optional<double> read_bowed(const Candidate& c, const CellCentres& design, 
     d.id = id;
   }
   return std::nullopt;
+}
+
+// A 3x3 read as a bent sheet. The sheet's 3 depth terms fit more than one id near a
+// reading (the nearest positions under the sheet fitted to a hypothesis' id can settle on
+// another id that fits, while the printed one fits better), so every id is weighed: with
+// the sheet's shifts taken at each cell's centre (they change little over the unit
+// between its positions), an id's misfit is the norm of a sum of one term per
+// cell, off the span of the shifts, and all 4^7 sums are formed. `fits` keeps the least
+// misfit and the least of any other id, over every call.
+struct SheetFits {
+  TagId best, second;
+  double best_misfit = std::numeric_limits<double>::infinity();
+  double second_misfit = std::numeric_limits<double>::infinity();
+  Decoding reading;  // the best id's hypothesis: its homography and blobs
+
+  void offer(TagId id, double misfit, const Decoding& from) {
+    if (misfit < best_misfit) {
+      if (id != best) second = best, second_misfit = best_misfit;
+      best = id, best_misfit = misfit, reading = from;
+    } else if (id != best && misfit < second_misfit) {
+      second = id, second_misfit = misfit;
+    }
+  }
+};
+
+void weigh_sheet_ids(const Candidate& c, const CellCentres& design, const Camera& camera, const Decoding& from,
+                     SheetFits& fits) {
+  const Family& f = c.family;
+  constexpr int cells = 9, rows = 2 * cells;
+  using Offsets = Eigen::Matrix<double, rows, 1>;
+  const Bow sheet = unfitted_bow(f, from.homography, camera);
+  Eigen::Matrix<double, rows, 9> shifts;
+  for (int g = 0; g < cells; ++g) {
+    const cv::Point2d centre = f.is_baseline(g) ? design[g][0] : (design[g][0] + design[g][3]) * 0.5;
+    const std::vector<cv::Vec2d> columns = bow_columns(f, sheet, centre);
+    for (int k = 0; k < 9; ++k) shifts(2 * g, k) = columns[k][0], shifts(2 * g + 1, k) = columns[k][1];
+  }
+  // Off the shifts' span: I - Q Q^T, Q an orthonormal basis of their columns.
+  const Eigen::HouseholderQR<Eigen::Matrix<double, rows, 9>> qr(shifts);
+  const Eigen::Matrix<double, rows, 9> q = qr.householderQ() * Eigen::Matrix<double, rows, 9>::Identity();
+  const Eigen::Matrix<double, rows, rows> off = Eigen::Matrix<double, rows, rows>::Identity() - q * q.transpose();
+  // term[g][v]: the part of cell g's offset, at digit v, that no sheet takes up.
+  std::array<std::array<Offsets, 4>, cells> term;
+  Offsets fixed = Offsets::Zero();
+  std::vector<int> data;
+  for (int g = 0; g < cells; ++g) {
+    const cv::Point2d blob = c.blobs[from.blob_of_cell[g]].point;
+    for (int v = 0; v < (f.is_baseline(g) ? 1 : 4); ++v) {
+      const cv::Point2d e = blob - apply(from.homography, design[g][v]);
+      term[g][v] = off.col(2 * g) * e.x + off.col(2 * g + 1) * e.y;
+    }
+    if (f.is_baseline(g))
+      fixed += term[g][0];
+    else
+      data.push_back(g);
+  }
+  std::array<Offsets, cells + 1> sums;
+  sums[0] = fixed;
+  const std::function<void(std::size_t, TagId)> descend = [&](std::size_t i, TagId id) {
+    if (i == data.size()) return fits.offer(id, sums[i].squaredNorm(), from);
+    const int g = data[i];
+    for (int v = 0; v < 4; ++v) {
+      sums[i + 1] = sums[i] + term[g][v];
+      descend(i + 1, id.with_digit(f.data_index(g), v));
+    }
+  };
+  descend(0, TagId());
 }
 
 // The homography through all n^2 blobs at their decoded positions.
@@ -705,13 +809,79 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   // reading that moves one square or a band of them at least min_noise_margin worse
   // (each rival's bow refitted), tau3 on its bowed misfit, its ink even. A flat marker
   // fits its bow with no curve, and is read so only when its own scatter allows it.
-  const auto read_on_bowed_grid = [&]() -> std::optional<Decoding> {
-    const int freedom = 2 * f.cell_count() - kBowedParameters;
-    if (f.n() < 4 || freedom <= 0) return std::nullopt;
+  // What every reading on a bowed grid must pass beyond its rivals: the homography
+  // refitted through its squares, the resolution, even ink, its margin (`margin`, else the
+  // bowed grid's margin against every square and band moved), tau3 on its bowed misfit.
+  const auto bowed_checks = [&](Decoding d, double misfit, std::optional<double> margin) -> std::optional<Decoding> {
+    const auto h = refit(c, design, d);
+    if (!h || !maps_marker(f, *h)) return std::nullopt;
+    d.homography = *h;
+    if (smallest_scale(d.homography, middle) < params.min_pixels_per_unit) return std::nullopt;
+    d.ink_spread = square_ink_spread(c, d);
+    if (!(d.ink_spread <= params.max_ink_spread)) return std::nullopt;
+    d.noise_margin = margin ? *margin : bowed_noise_margin(c, design, d, camera, true);
+    if (d.noise_margin < params.min_noise_margin) return std::nullopt;
+    d.edge_score = edge_gradient(image, camera, d.homography, 2, side - 2);
+    if (!(d.edge_score > 0)) return std::nullopt;
+    d.error = misfit / norm / d.edge_score;
+    if (d.error > params.decode_threshold(f)) return std::nullopt;
+    d.verdict = Verdict::accepted;
+    return d;
+  };
+  // 3x3: the id the sheet fits best over every id and plausible hypothesis, with its margin
+  // over the best other id there (half the root of how much worse it fits, over the
+  // scatter about the sheet): no rival is left unweighed. Only where a bend shows: the
+  // sheet's 3 depth terms take up more of the flat reading's misfit than Gaussian noise
+  // would but once in a hundred times (an F test: F(3, 7) at 0.99 is 8.45, for 3 depth
+  // terms and 18 - 11 degrees of freedom left; the scatter at least 0.02 px, as for the
+  // noise margin). Elsewhere the flat grid's verdict stands.
+  const auto read_on_sheet = [&](const Decoding& flat, int freedom) -> std::optional<Decoding> {
+    constexpr double kF3And7At99 = 8.45;
+    SheetFits fits;
+    std::vector<const Decoding*> weighed;
+    for (const Reading& r : readings) {
+      if (!r.resolved || !(r.d.ink_spread <= params.max_ink_spread)) continue;
+      const bool seen = std::any_of(weighed.begin(), weighed.end(), [&](const Decoding* d) {
+        return d->blob_of_cell == r.d.blob_of_cell && d->homography == r.d.homography;
+      });
+      if (seen) continue;
+      weighed.push_back(&r.d);
+      weigh_sheet_ids(c, design, camera, r.d, fits);
+    }
+    if (!std::isfinite(fits.best_misfit)) return std::nullopt;
+    double flat_misfit = 0;
+    const std::vector<cv::Point2d> flat_units = units_of(f, design, flat.id);
+    for (int g = 0; g < f.cell_count(); ++g) {
+      const cv::Point2d e = c.blobs[flat.blob_of_cell[g]].point - apply(flat.homography, flat_units[g]);
+      flat_misfit += e.dot(e);
+    }
+    if (!((flat_misfit - fits.best_misfit) / 3 > kF3And7At99 * std::max(fits.best_misfit / freedom, 0.02 * 0.02)))
+      return std::nullopt;
+    // No other id within a factor min_decode_margin, as for a flat reading.
+    if (fits.second_misfit < params.min_decode_margin * fits.best_misfit) return std::nullopt;
+    Decoding d = fits.reading;
+    d.id = fits.best;
+    const Bow sheet = fit_bow(c, unfitted_bow(f, d.homography, camera), d.blob_of_cell, units_of(f, design, d.id));
+    d.worst_cell = 0;
+    for (int g = 0; g < f.cell_count(); ++g) {
+      const int digit = f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g));
+      const cv::Point2d off = c.blobs[d.blob_of_cell[g]].point - bowed(f, sheet, design[g][digit]);
+      d.worst_cell =
+          std::max(d.worst_cell, cv::norm(pixels_to_units(d.homography, design[g][digit]) * cv::Vec2d(off.x, off.y)));
+    }
+    if (d.worst_cell > params.max_cell_residual) return std::nullopt;
+    const double spread = std::max(std::sqrt(fits.best_misfit / freedom), 0.02);
+    const double margin = std::sqrt(std::max(fits.second_misfit - fits.best_misfit, 0.0)) / (2 * spread);
+    return bowed_checks(d, sheet.misfit, margin);
+  };
+  const auto read_on_bowed_grid = [&](const Decoding& flat) -> std::optional<Decoding> {
+    const int freedom = 2 * f.cell_count() - bow_parameters(f.n() < 4);
+    if (f.n() < 3 || freedom <= 0) return std::nullopt;
     struct Bowed {
       Decoding d;
       double misfit;
     };
+    if (f.n() == 3) return read_on_sheet(flat, freedom);
     std::vector<Bowed> bowed_readings;
     for (const Reading& r : readings) {
       if (!r.resolved || !(r.d.ink_spread <= params.max_ink_spread)) continue;
@@ -720,7 +890,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
       });
       if (seen) continue;
       Decoding d = r.d;
-      if (const auto misfit = read_bowed(c, design, d)) bowed_readings.push_back({d, *misfit});
+      if (const auto misfit = read_bowed(c, design, camera, d)) bowed_readings.push_back({d, *misfit});
     }
     if (bowed_readings.empty()) return std::nullopt;
     Bowed best = *std::min_element(bowed_readings.begin(), bowed_readings.end(),
@@ -731,26 +901,12 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
       if (other.d.id != best.d.id &&
           std::sqrt(std::max(other.misfit - best.misfit, 0.0)) / (2 * spread) < params.min_noise_margin)
         return std::nullopt;
-    const auto h = refit(c, design, best.d);
-    if (!h || !maps_marker(f, *h)) return std::nullopt;
-    Decoding& d = best.d;
-    d.homography = *h;
-    if (smallest_scale(d.homography, middle) < params.min_pixels_per_unit) return std::nullopt;
-    d.ink_spread = square_ink_spread(c, d);
-    if (!(d.ink_spread <= params.max_ink_spread)) return std::nullopt;
-    d.noise_margin = bowed_noise_margin(c, design, d, true);
-    if (d.noise_margin < params.min_noise_margin) return std::nullopt;
-    d.edge_score = edge_gradient(image, camera, d.homography, 2, side - 2);
-    if (!(d.edge_score > 0)) return std::nullopt;
-    d.error = best.misfit / norm / d.edge_score;
-    if (d.error > params.decode_threshold(f)) return std::nullopt;
-    d.verdict = Verdict::accepted;
-    return d;
+    return bowed_checks(best.d, best.misfit, std::nullopt);
   };
   const auto refused = [&](Decoding flat) {
     if (flat.verdict != Verdict::residual && flat.verdict != Verdict::margin) return flat;
     const auto start = std::chrono::steady_clock::now();
-    const std::optional<Decoding> d = read_on_bowed_grid();
+    const std::optional<Decoding> d = read_on_bowed_grid(flat);
     stats.decode_ms += elapsed_ms(start);
     if (!d) return flat;
     ++stats.bowed;
@@ -833,7 +989,8 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     }
   // And the least certain digit clear of the noise (every digit pattern is an id).
   if (f.n() > 2) {
-    best.noise_margin = std::min(digit_noise_margin(c, design, best), bowed_noise_margin(c, design, best, false));
+    best.noise_margin = digit_noise_margin(c, design, best);
+    if (f.n() >= 4) best.noise_margin = std::min(best.noise_margin, bowed_noise_margin(c, design, best, camera, false));
     if (best.noise_margin < params.min_noise_margin) {
       best.verdict = Verdict::margin;
       return refused(best);
