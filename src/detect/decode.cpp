@@ -7,7 +7,6 @@
 // residual wins.
 #include <algorithm>
 #include <cmath>
-#include <functional>
 #include <limits>
 
 #include <Eigen/Dense>
@@ -601,16 +600,16 @@ std::optional<double> read_bowed(const Candidate& c, const CellCentres& design, 
 // reading (the nearest positions under the sheet fitted to a hypothesis' id can settle on
 // another id that fits, while the printed one fits better), so every id is weighed: with
 // the sheet's shifts taken at each cell's centre (they change little over the unit
-// between its positions), an id's misfit is the norm of a sum of one term per
-// cell, off the span of the shifts, and all 4^7 sums are formed. `fits` keeps the least
-// misfit and the least of any other id, over every call.
+// between its positions), an id's misfit is the norm of a sum of one term per cell, in
+// the 9 coordinates off the span of the shifts, and all 4^7 sums are formed. `fits`
+// keeps the least misfit and the least of any other id, over every call.
 struct SheetFits {
   TagId best, second;
   double best_misfit = std::numeric_limits<double>::infinity();
   double second_misfit = std::numeric_limits<double>::infinity();
-  Decoding reading;  // the best id's hypothesis: its homography and blobs
+  const Decoding* reading = nullptr;  // the best id's hypothesis: its homography and blobs
 
-  void offer(TagId id, double misfit, const Decoding& from) {
+  void offer(TagId id, double misfit, const Decoding* from) {
     if (misfit < best_misfit) {
       if (id != best) second = best, second_misfit = best_misfit;
       best = id, best_misfit = misfit, reading = from;
@@ -623,45 +622,56 @@ struct SheetFits {
 void weigh_sheet_ids(const Candidate& c, const CellCentres& design, const Camera& camera, const Decoding& from,
                      SheetFits& fits) {
   const Family& f = c.family;
-  constexpr int cells = 9, rows = 2 * cells;
-  using Offsets = Eigen::Matrix<double, rows, 1>;
+  constexpr int cells = 9, rows = 2 * cells, coefficients = 9, left = rows - coefficients, digits = cells - 2;
+  using Offsets = Eigen::Matrix<double, left, 1>;
   const Bow sheet = unfitted_bow(f, from.homography, camera);
-  Eigen::Matrix<double, rows, 9> shifts;
+  Eigen::Matrix<double, rows, coefficients> shifts;
   for (int g = 0; g < cells; ++g) {
     const cv::Point2d centre = f.is_baseline(g) ? design[g][0] : (design[g][0] + design[g][3]) * 0.5;
     const std::vector<cv::Vec2d> columns = bow_columns(f, sheet, centre);
-    for (int k = 0; k < 9; ++k) shifts(2 * g, k) = columns[k][0], shifts(2 * g + 1, k) = columns[k][1];
+    for (int k = 0; k < coefficients; ++k) shifts(2 * g, k) = columns[k][0], shifts(2 * g + 1, k) = columns[k][1];
   }
-  // Off the shifts' span: I - Q Q^T, Q an orthonormal basis of their columns.
-  const Eigen::HouseholderQR<Eigen::Matrix<double, rows, 9>> qr(shifts);
-  const Eigen::Matrix<double, rows, 9> q = qr.householderQ() * Eigen::Matrix<double, rows, 9>::Identity();
-  const Eigen::Matrix<double, rows, rows> off = Eigen::Matrix<double, rows, rows>::Identity() - q * q.transpose();
-  // term[g][v]: the part of cell g's offset, at digit v, that no sheet takes up.
-  std::array<std::array<Offsets, 4>, cells> term;
+  // The last `left` columns of the full Q of the shifts: an orthonormal basis off their span.
+  const Eigen::HouseholderQR<Eigen::Matrix<double, rows, coefficients>> qr(shifts);
+  const Eigen::Matrix<double, rows, rows> q = qr.householderQ();
+  const Eigen::Matrix<double, left, rows> off = q.rightCols<left>().transpose();
+  // term[i][v]: data cell i's offset at digit v, in those coordinates; the baselines' in `fixed`.
+  std::array<std::array<Offsets, 4>, digits> term;
+  std::array<int, digits> cell{};
   Offsets fixed = Offsets::Zero();
-  std::vector<int> data;
+  int i = 0;
   for (int g = 0; g < cells; ++g) {
     const cv::Point2d blob = c.blobs[from.blob_of_cell[g]].point;
-    for (int v = 0; v < (f.is_baseline(g) ? 1 : 4); ++v) {
+    const auto offset = [&](int v) {
       const cv::Point2d e = blob - apply(from.homography, design[g][v]);
-      term[g][v] = off.col(2 * g) * e.x + off.col(2 * g + 1) * e.y;
+      return Offsets(off.col(2 * g) * e.x + off.col(2 * g + 1) * e.y);
+    };
+    if (f.is_baseline(g)) {
+      fixed += offset(0);
+      continue;
     }
-    if (f.is_baseline(g))
-      fixed += term[g][0];
-    else
-      data.push_back(g);
+    cell[i] = g;
+    for (int v = 0; v < 4; ++v) term[i][v] = offset(v);
+    ++i;
   }
-  std::array<Offsets, cells + 1> sums;
+  // Every digit pattern, as an odometer: sums[k] holds `fixed` and the first k terms.
+  std::array<int, digits> digit{};
+  std::array<Offsets, digits + 1> sums;
   sums[0] = fixed;
-  const std::function<void(std::size_t, TagId)> descend = [&](std::size_t i, TagId id) {
-    if (i == data.size()) return fits.offer(id, sums[i].squaredNorm(), from);
-    const int g = data[i];
-    for (int v = 0; v < 4; ++v) {
-      sums[i + 1] = sums[i] + term[g][v];
-      descend(i + 1, id.with_digit(f.data_index(g), v));
+  for (int k = 0; k < digits; ++k) sums[k + 1] = sums[k] + term[k][0];
+  for (;;) {
+    const double misfit = sums[digits].squaredNorm();
+    if (misfit < fits.second_misfit) {
+      TagId id;
+      for (int k = 0; k < digits; ++k) id = id.with_digit(f.data_index(cell[k]), digit[k]);
+      fits.offer(id, misfit, &from);
     }
-  };
-  descend(0, TagId());
+    int k = digits - 1;
+    while (k >= 0 && digit[k] == 3) digit[k--] = 0;
+    if (k < 0) break;
+    ++digit[k];
+    for (; k < digits; ++k) sums[k + 1] = sums[k] + term[k][digit[k]];
+  }
 }
 
 // The homography through all n^2 blobs at their decoded positions.
@@ -859,7 +869,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
       return std::nullopt;
     // No other id within a factor min_decode_margin, as for a flat reading.
     if (fits.second_misfit < params.min_decode_margin * fits.best_misfit) return std::nullopt;
-    Decoding d = fits.reading;
+    Decoding d = *fits.reading;
     d.id = fits.best;
     const Bow sheet = fit_bow(c, unfitted_bow(f, d.homography, camera), d.blob_of_cell, units_of(f, design, d.id));
     d.worst_cell = 0;
