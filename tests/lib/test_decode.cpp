@@ -727,9 +727,40 @@ TEST(Decode, ABent3x3IsReadAsASheetOrNotAtAll) {
     sheets += stats.bowed;
   }
   EXPECT_EQ(wrong, 0);
-  // Measured: 32 of 40 found, 13 of them as sheets (19 flat alone).
-  EXPECT_GE(found, 30);
+  // Measured: 30 of 40 found, 12 of them as sheets.
+  EXPECT_GE(found, 28);
   EXPECT_GE(sheets, 10);
+}
+
+TEST(Decode, AContestedFlatReadingOfABent3x3IsLeftToTheSheet) {
+  // Id 668 on a cylinder of 0.163 m (its sides towards the camera), 0.55 m away, tilted:
+  // the bend moves two squares towards other positions, and the flat grid reads 4828
+  // (digits 1, 3 for 0, 2) 2.06 scatters clear, while the hypothesis reading 668 passes
+  // every check of where its blobs lie as well. The sheet fits 668 11 times better than
+  // the flat grid fits 4828, and reads 668 3.75 scatters clear of any other id.
+  SceneParams p;
+  p.camera = Camera::pinhole(900, 900, 639.5, 359.5, 1280, 720);
+  p.noise_sigma = 1;
+  p.background = 0.3;
+  SceneMarker m;
+  m.family = Family(3);
+  m.id = 668;
+  m.tag_size = 0.1;
+  m.tvec = {0.036178500627843391, -0.036922570554161503, 0.55};
+  m.rvec = {0.8048191655171425, -0.47654052303765709, -2.7163075291525427};
+  SceneTarget target = to_target(m);
+  target.bend_radius = -0.1630951756352492;
+  const cv::Mat1b image = SceneRenderer(p).render({target}, 1);
+  DetectorParams params;
+  params.camera = p.camera;
+  params.families = {m.family};
+  params.tag_size = m.tag_size;
+  DetectionStats stats;
+  const std::vector<Detection> found = Detector(params).detect(ImageView(image), &stats);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_EQ(found[0].id, m.id) << found[0].id.to_decimal();
+  EXPECT_EQ(stats.bowed, 1);
+  EXPECT_GE(found[0].noise_margin, params.min_noise_margin);
 }
 
 TEST(Decode, ABentMarkerIsReadOnABowedGridOrNotAtAll) {
