@@ -845,8 +845,21 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   // would but once in a hundred times (an F test: F(3, 7) at 0.99 is 8.45, for 3 depth
   // terms and 18 - 11 degrees of freedom left; the scatter at least 0.02 px, as for the
   // noise margin). Elsewhere the flat grid's verdict stands. `bent` tells whether it did.
-  const auto read_on_sheet = [&](const Decoding& flat, int freedom, bool* bent = nullptr) -> std::optional<Decoding> {
+  const auto flat_misfit_of = [&](const Decoding& d) {
+    const std::vector<cv::Point2d> units = units_of(f, design, d.id);
+    double misfit = 0;
+    for (int g = 0; g < f.cell_count(); ++g) {
+      const cv::Point2d e = c.blobs[d.blob_of_cell[g]].point - apply(d.homography, units[g]);
+      misfit += e.dot(e);
+    }
+    return misfit;
+  };
+  const int sheet_freedom = 2 * f.cell_count() - bow_parameters(true);
+  const auto bend_shows = [&](double flat_misfit, double sheet_misfit) {
     constexpr double kF3And7At99 = 8.45;
+    return (flat_misfit - sheet_misfit) / 3 > kF3And7At99 * std::max(sheet_misfit / sheet_freedom, 0.02 * 0.02);
+  };
+  const auto read_on_sheet = [&](const Decoding& flat, bool* bent = nullptr) -> std::optional<Decoding> {
     SheetFits fits;
     std::vector<const Decoding*> weighed;
     for (const Reading& r : readings) {
@@ -858,15 +871,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
       weighed.push_back(&r.d);
       weigh_sheet_ids(c, design, camera, r.d, fits);
     }
-    if (!std::isfinite(fits.best_misfit)) return std::nullopt;
-    double flat_misfit = 0;
-    const std::vector<cv::Point2d> flat_units = units_of(f, design, flat.id);
-    for (int g = 0; g < f.cell_count(); ++g) {
-      const cv::Point2d e = c.blobs[flat.blob_of_cell[g]].point - apply(flat.homography, flat_units[g]);
-      flat_misfit += e.dot(e);
-    }
-    if (!((flat_misfit - fits.best_misfit) / 3 > kF3And7At99 * std::max(fits.best_misfit / freedom, 0.02 * 0.02)))
-      return std::nullopt;
+    if (!std::isfinite(fits.best_misfit) || !bend_shows(flat_misfit_of(flat), fits.best_misfit)) return std::nullopt;
     if (bent) *bent = true;
     // No other id within a factor min_decode_margin, as for a flat reading.
     if (fits.second_misfit < params.min_decode_margin * fits.best_misfit) return std::nullopt;
@@ -881,7 +886,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
           std::max(d.worst_cell, cv::norm(pixels_to_units(d.homography, design[g][digit]) * cv::Vec2d(off.x, off.y)));
     }
     if (d.worst_cell > params.max_cell_residual) return std::nullopt;
-    const double spread = std::max(std::sqrt(fits.best_misfit / freedom), 0.02);
+    const double spread = std::max(std::sqrt(fits.best_misfit / sheet_freedom), 0.02);
     const double margin = std::sqrt(std::max(fits.second_misfit - fits.best_misfit, 0.0)) / (2 * spread);
     return bowed_checks(d, sheet.misfit, margin);
   };
@@ -892,7 +897,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
       Decoding d;
       double misfit;
     };
-    if (f.n() == 3) return read_on_sheet(flat, freedom);
+    if (f.n() == 3) return read_on_sheet(flat);
     std::vector<Bowed> bowed_readings;
     for (const Reading& r : readings) {
       if (!r.resolved || !(r.d.ink_spread <= params.max_ink_spread)) continue;
@@ -1013,13 +1018,20 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   // their edge scores do (a 3x3 on a 0.16 m cylinder, tilted, was read so, 2.06 scatters
   // clear; the sheet fitted the printed id 11 times better). Where a bend shows, the
   // sheet decides (a reading of the flat id stays the flat one, with its homography, for
-  // the pose); elsewhere the flat reading stands.
+  // the pose); elsewhere the flat reading stands. Most contested readings are flat: the
+  // sheets of the contesting readings' own ids tell them, before every id is weighed.
   const bool contested =
       std::any_of(readings.begin(), readings.end(), [&](const Reading& r) { return r.passes && r.d.id != best.id; });
   if (f.n() == 3 && contested) {
     const auto start = std::chrono::steady_clock::now();
+    const double flat_misfit = flat_misfit_of(best);
+    const bool maybe_bent = std::any_of(readings.begin(), readings.end(), [&](const Reading& r) {
+      if (!r.passes) return false;
+      const Bow sheet = unfitted_bow(f, r.d.homography, camera);
+      return bend_shows(flat_misfit, fit_bow(c, sheet, r.d.blob_of_cell, units_of(f, design, r.d.id)).misfit);
+    });
     bool bent = false;
-    const std::optional<Decoding> sheet = read_on_sheet(best, 2 * f.cell_count() - bow_parameters(true), &bent);
+    const std::optional<Decoding> sheet = maybe_bent ? read_on_sheet(best, &bent) : std::nullopt;
     stats.decode_ms += elapsed_ms(start);
     if (bent) {
       if (!sheet) {
