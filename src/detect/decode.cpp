@@ -438,6 +438,8 @@ struct Bow {
 
 // Parameters fitted in all, with the homography's.
 int bow_parameters(bool sheet) { return sheet ? 11 : 14; }
+// The bow's own coefficients: b's 12 terms, or a sheet's 6 affine and 3 depth terms.
+int bow_coefficients(bool sheet) { return sheet ? 9 : 12; }
 
 // A bow of shape `sheet` under h, not yet fitted. The sheet's normal needs the camera: h
 // maps units to ideal pixels, so K^-1 h holds the sheet's axes (scaled alike).
@@ -456,31 +458,32 @@ Bow unfitted_bow(const Family& f, const cv::Matx33d& h, const Camera& camera) {
   return bow;
 }
 
-// The pixel shift at unit point u that each of the bow's coefficients makes, per unit.
-std::vector<cv::Vec2d> bow_columns(const Family& f, const Bow& bow, cv::Point2d u) {
+// The pixel shift at unit point u that each of the bow's coefficients makes, per unit
+// (the first 12 of a free bow, the first 9 of a sheet).
+using BowColumns = std::array<cv::Vec2d, 12>;
+BowColumns bow_columns(const Family& f, const Bow& bow, cv::Point2d u) {
   const double x = u.x / f.side() - 0.5, y = u.y / f.side() - 0.5;
   const std::array<double, 6> t = {1, x, y, x * x, x * y, y * y};
   const cv::Matx22d j = units_to_pixels(bow.h, u);
   const cv::Vec2d along_x(j(0, 0), j(1, 0)), along_y(j(0, 1), j(1, 1));
   const int terms = bow.sheet ? 3 : 6;
-  std::vector<cv::Vec2d> columns;
-  for (int k = 0; k < terms; ++k) columns.push_back(along_x * t[k]);
-  for (int k = 0; k < terms; ++k) columns.push_back(along_y * t[k]);
+  BowColumns columns;
+  for (int k = 0; k < terms; ++k) columns[k] = along_x * t[k], columns[terms + k] = along_y * t[k];
   if (bow.sheet) {
     const cv::Vec3d q = bow.h * cv::Vec3d(u.x, u.y, 1.0);
     const cv::Vec2d deeper((bow.normal[0] - q[0] / q[2] * bow.normal[2]) / q[2],
                            (bow.normal[1] - q[1] / q[2] * bow.normal[2]) / q[2]);
-    for (int k = 3; k < 6; ++k) columns.push_back(deeper * (t[k] * f.side()));
+    for (int k = 3; k < 6; ++k) columns[3 + k] = deeper * (t[k] * f.side());
   }
   return columns;
 }
 
 // The bow under h that puts the squares at `units` (grid order) nearest their blobs.
 Bow fit_bow(const Candidate& c, Bow bow, const std::vector<int>& blob_of_cell, const std::vector<cv::Point2d>& units) {
-  const int cells = c.family.cell_count(), terms = bow.sheet ? 9 : 12;
+  const int cells = c.family.cell_count(), terms = bow_coefficients(bow.sheet);
   cv::Mat columns(2 * cells, terms, CV_64F, 0.0), offsets(2 * cells, 1, CV_64F);
   for (int g = 0; g < cells; ++g) {
-    const std::vector<cv::Vec2d> shifts = bow_columns(c.family, bow, units[g]);
+    const BowColumns shifts = bow_columns(c.family, bow, units[g]);
     const cv::Point2d off = c.blobs[blob_of_cell[g]].point - apply(bow.h, units[g]);
     for (int k = 0; k < terms; ++k)
       columns.at<double>(2 * g, k) = shifts[k][0], columns.at<double>(2 * g + 1, k) = shifts[k][1];
@@ -493,10 +496,10 @@ Bow fit_bow(const Candidate& c, Bow bow, const std::vector<int>& blob_of_cell, c
 }
 
 cv::Point2d bowed(const Family& f, const Bow& bow, cv::Point2d u) {
-  const std::vector<cv::Vec2d> shifts = bow_columns(f, bow, u);
+  const BowColumns shifts = bow_columns(f, bow, u);
   cv::Point2d p = apply(bow.h, u);
-  for (std::size_t k = 0; k < shifts.size(); ++k)
-    p += cv::Point2d(shifts[k][0], shifts[k][1]) * bow.coefficients.at<double>(int(k));
+  for (int k = 0; k < bow_coefficients(bow.sheet); ++k)
+    p += cv::Point2d(shifts[k][0], shifts[k][1]) * bow.coefficients.at<double>(k);
   return p;
 }
 
@@ -628,7 +631,7 @@ void weigh_sheet_ids(const Candidate& c, const CellCentres& design, const Camera
   Eigen::Matrix<double, rows, coefficients> shifts;
   for (int g = 0; g < cells; ++g) {
     const cv::Point2d centre = f.is_baseline(g) ? design[g][0] : (design[g][0] + design[g][3]) * 0.5;
-    const std::vector<cv::Vec2d> columns = bow_columns(f, sheet, centre);
+    const BowColumns columns = bow_columns(f, sheet, centre);
     for (int k = 0; k < coefficients; ++k) shifts(2 * g, k) = columns[k][0], shifts(2 * g + 1, k) = columns[k][1];
   }
   // The last `left` columns of the full Q of the shifts: an orthonormal basis off their span.
