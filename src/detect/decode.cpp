@@ -628,16 +628,18 @@ void weigh_sheet_ids(const Candidate& c, const CellCentres& design, const Camera
   constexpr int cells = 9, rows = 2 * cells, coefficients = 9, left = rows - coefficients, digits = cells - 2;
   using Offsets = Eigen::Matrix<double, left, 1>;
   const Bow sheet = unfitted_bow(f, from.homography, camera);
-  Eigen::Matrix<double, rows, coefficients> shifts;
+  cv::Mat1d shifts(rows, coefficients), w, u, vt;
   for (int g = 0; g < cells; ++g) {
     const cv::Point2d centre = f.is_baseline(g) ? design[g][0] : (design[g][0] + design[g][3]) * 0.5;
     const BowColumns columns = bow_columns(f, sheet, centre);
     for (int k = 0; k < coefficients; ++k) shifts(2 * g, k) = columns[k][0], shifts(2 * g + 1, k) = columns[k][1];
   }
-  // The last `left` columns of the full Q of the shifts: an orthonormal basis off their span.
-  const Eigen::HouseholderQR<Eigen::Matrix<double, rows, coefficients>> qr(shifts);
-  const Eigen::Matrix<double, rows, rows> q = qr.householderQ();
-  const Eigen::Matrix<double, left, rows> off = q.rightCols<left>().transpose();
+  // The last `left` left-singular vectors of the shifts: an orthonormal basis off their
+  // span. (OpenCV's SVD: Eigen's Householder QR trips GCC 12's -Wmaybe-uninitialized.)
+  cv::SVD::compute(shifts, w, u, vt, cv::SVD::FULL_UV);
+  Eigen::Matrix<double, left, rows> off;
+  for (int i = 0; i < left; ++i)
+    for (int r = 0; r < rows; ++r) off(i, r) = u.at<double>(r, coefficients + i);
   // term[i][v]: data cell i's offset at digit v, in those coordinates; the baselines' in `fixed`.
   std::array<std::array<Offsets, 4>, digits> term;
   std::array<int, digits> cell{};
