@@ -816,14 +816,6 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     return a.error != b.error ? a.error < b.error : a.edge_score > b.edge_score;
   };
 
-  // A 4x4 or larger refused flat for where its squares lie (cell residual, tau3, a rival
-  // id or digit too close) is read again on a bowed grid: each hypothesis of a plausible
-  // turn (resolved, its ink even) re-reads its squares under its own bow, and the least
-  // misfit wins. It is held to the same bounds, with the bowed grid's scatter as the
-  // noise: its cells within max_cell_residual, every other hypothesis' id and every
-  // reading that moves one square or a band of them at least min_noise_margin worse
-  // (each rival's bow refitted), tau3 on its bowed misfit, its ink even. A flat marker
-  // fits its bow with no curve, and is read so only when its own scatter allows it.
   // What every reading on a bowed grid must pass beyond its rivals: the homography
   // refitted through its squares, the resolution, even ink, its margin (`margin`, else the
   // bowed grid's margin against every square and band moved), tau3 on its bowed misfit.
@@ -895,6 +887,15 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     const double margin = std::sqrt(std::max(fits.second_misfit - fits.best_misfit, 0.0)) / (2 * spread);
     return bowed_checks(d, sheet.misfit, margin);
   };
+  // A reading refused flat for where its squares lie (cell residual, tau3, a rival id or
+  // digit too close) is read again on a bowed grid; a 3x3's as a sheet (read_on_sheet).
+  // From 4x4 each hypothesis of a plausible turn (resolved, its ink even) re-reads its
+  // squares under its own bow, and the least misfit wins. It is held to the same bounds,
+  // with the bowed grid's scatter as the noise: its cells within max_cell_residual, every
+  // other hypothesis' id and every reading that moves one square or a band of them at
+  // least min_noise_margin worse (each rival's bow refitted), tau3 on its bowed misfit,
+  // its ink even. A flat marker fits its bow with no curve, and is read so only when its
+  // own scatter allows it.
   const auto read_on_bowed_grid = [&](const Decoding& flat) -> std::optional<Decoding> {
     const int freedom = 2 * f.cell_count() - bow_parameters(f.n() < 4);
     if (f.n() < 3 || freedom <= 0) return std::nullopt;
