@@ -659,24 +659,43 @@ void weigh_sheet_ids(const Candidate& c, const CellCentres& design, const Camera
     for (int v = 0; v < 4; ++v) term[i][v] = offset(v);
     ++i;
   }
-  // Every digit pattern, as an odometer: sums[k] holds `fixed` and the first k terms.
-  std::array<int, digits> digit{};
-  std::array<Offsets, digits + 1> sums;
-  sums[0] = fixed;
-  for (int k = 0; k < digits; ++k) sums[k + 1] = sums[k] + term[k][0];
-  for (;;) {
-    const double misfit = sums[digits].squaredNorm();
-    if (misfit < fits.second_misfit) {
-      TagId id;
-      for (int k = 0; k < digits; ++k) id = id.with_digit(f.data_index(cell[k]), digit[k]);
-      fits.offer(id, misfit, &from);
-    }
-    int k = digits - 1;
-    while (k >= 0 && digit[k] == 3) digit[k--] = 0;
-    if (k < 0) break;
-    ++digit[k];
-    for (; k < digits; ++k) sums[k + 1] = sums[k] + term[k][digit[k]];
+  // Every digit pattern, depth first, the nearer digits first; a branch is left when no
+  // pattern in it can fit better than the second id kept (a pattern's sum lies within the
+  // remaining terms' spread of their centres' sum), which leaves `fits` as weighing every
+  // pattern would.
+  std::array<Offsets, digits + 1> centre_sum;   // [k]: the centres of terms k and after
+  std::array<double, digits + 1> spread_sum{};  // [k]: their largest distances from their centres
+  centre_sum[digits] = Offsets::Zero();
+  for (int k = digits - 1; k >= 0; --k) {
+    const Offsets centre = (term[k][0] + term[k][1] + term[k][2] + term[k][3]) / 4;
+    double spread = 0;
+    for (const Offsets& t : term[k]) spread = std::max(spread, (t - centre).norm());
+    centre_sum[k] = centre_sum[k + 1] + centre;
+    spread_sum[k] = spread_sum[k + 1] + spread;
   }
+  std::array<int, digits> digit{};
+  const auto visit = [&](const auto& self, int k, const Offsets& sum) -> void {
+    if (k == digits) {
+      const double misfit = sum.squaredNorm();
+      if (misfit < fits.second_misfit) {
+        TagId id;
+        for (int j = 0; j < digits; ++j) id = id.with_digit(f.data_index(cell[j]), digit[j]);
+        fits.offer(id, misfit, &from);
+      }
+      return;
+    }
+    std::array<std::pair<double, int>, 4> order;
+    for (int v = 0; v < 4; ++v) order[std::size_t(v)] = {(sum + term[k][v] + centre_sum[k + 1]).squaredNorm(), v};
+    std::sort(order.begin(), order.end());
+    for (const auto& [distance, v] : order) {
+      // (1 - 1e-9): the bound kept below the misfits it bounds whatever their rounding.
+      const double reach = std::max(0.0, std::sqrt(distance) - spread_sum[k + 1]);
+      if (reach * reach * (1 - 1e-9) >= fits.second_misfit) break;
+      digit[std::size_t(k)] = v;
+      self(self, k + 1, Offsets(sum + term[k][v]));
+    }
+  };
+  visit(visit, 0, fixed);
 }
 
 // The homography through all n^2 blobs at their decoded positions.
