@@ -588,15 +588,8 @@ class PixelModel {
     const int side = family.side();
     if (cv::norm(smear) > 0.5) smear_ = smear;
     const cv::Matx33d to_units = h.inv();
-    // The marker and its one-unit white margin, with room for the widest blur.
-    std::vector<cv::Point2f> margin;
-    for (const cv::Point2d& u :
-         {cv::Point2d(-1, -1), cv::Point2d(side + 1, -1), cv::Point2d(side + 1, side + 1), cv::Point2d(-1, side + 1)})
-      margin.emplace_back(cv::Point2f(apply(h, u)));
-    const int pad = int(std::ceil(3 * kMaxBlur * pixels_per_unit + cv::norm(smear_) * kSmearScales.back() / 2)) + 1;
-    box_ = cv::boundingRect(margin);
-    box_ = cv::Rect(box_.x - pad, box_.y - pad, box_.width + 2 * pad, box_.height + 2 * pad) &
-           cv::Rect(0, 0, image.width, image.height);
+    const int pad = blur_reach(pixels_per_unit, smear_);
+    box_ = pixels_read(image, h, family, pixels_per_unit, smear);
     if (box_.area() == 0 || box_.area() > kMaxPixels) return;
     grey_ = recycled_map(box_.size());
     use_.create(box_.size());
@@ -716,6 +709,21 @@ class PixelModel {
 
   bool valid() const { return !grey_.empty(); }
 
+  // The frame pixels a model of the marker under `h` reads: the marker and its one-unit
+  // white margin, with room for the widest blur.
+  static cv::Rect pixels_read(const ImageView& image, const cv::Matx33d& h, const Family& family,
+                              double pixels_per_unit, cv::Point2d smear) {
+    const int side = family.side();
+    std::vector<cv::Point2f> margin;
+    for (const cv::Point2d& u :
+         {cv::Point2d(-1, -1), cv::Point2d(side + 1, -1), cv::Point2d(side + 1, side + 1), cv::Point2d(-1, side + 1)})
+      margin.emplace_back(cv::Point2f(apply(h, u)));
+    const int pad = blur_reach(pixels_per_unit, cv::norm(smear) > 0.5 ? smear : cv::Point2d());
+    const cv::Rect box = cv::boundingRect(margin);
+    return cv::Rect(box.x - pad, box.y - pad, box.width + 2 * pad, box.height + 2 * pad) &
+           cv::Rect(0, 0, image.width, image.height);
+  }
+
   // The least motion blur a reading can report (Reading::smear) for a smear found while
   // aligning, frame pixels: every length it tries is a scale of that one.
   static double least_smear(cv::Point2d smear) {
@@ -784,6 +792,11 @@ class PixelModel {
     double scale = 0, blur = 0;
     bool operator!=(const Choice& o) const { return scale != o.scale || blur != o.blur; }
   };
+
+  // How far the widest optical blur and the longest smear tried reach, pixels.
+  static int blur_reach(double pixels_per_unit, cv::Point2d smear) {
+    return int(std::ceil(3 * kMaxBlur * pixels_per_unit + cv::norm(smear) * kSmearScales.back() / 2)) + 1;
+  }
 
   // `m` blurred by a Gaussian of `sigma` pixels (nothing beyond the box).
   static cv::Mat1f blurred_by(const cv::Mat1f& m, double sigma) {
@@ -1501,11 +1514,35 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // The id: each data cell read from grey levels sampled under h (fast, but blurred by the
   // sampling), then every cell's square moved to where the marker's predicted pixels fit
   // the frame's best (PixelModel).
+  // A marker of more than kTemplateScale pixels per unit is modelled on its pixels reduced
+  // to that (the area average, as a coarser camera would see it): the model's cost grows
+  // with its pixels and with its blurs' reach, and a square's one-unit shift shows plainly
+  // at three pixels.
   const auto read_id = [&](const cv::Matx33d& under) -> std::optional<PixelModel::Reading> {
-    const PixelModel model(image, under, family, out.pixels_per_unit, smear);
-    if (!model.valid()) return std::nullopt;
     const TagId sampled = read_cells(image, under, family, out.pixels_per_unit);
-    return model.read(sampled, out.pixels_per_unit, white - black);
+    if (out.pixels_per_unit <= kTemplateScale) {
+      const PixelModel model(image, under, family, out.pixels_per_unit, smear);
+      if (!model.valid()) return std::nullopt;
+      return model.read(sampled, out.pixels_per_unit, white - black);
+    }
+    const cv::Rect region = PixelModel::pixels_read(image, under, family, out.pixels_per_unit, smear);
+    if (region.empty()) return std::nullopt;
+    const double scale = kTemplateScale / out.pixels_per_unit;
+    cv::Mat1b reduced;
+    cv::resize(image.mat()(region), reduced,
+               cv::Size(std::max(1, int(std::lround(region.width * scale))),
+                        std::max(1, int(std::lround(region.height * scale)))),
+               0, 0, cv::INTER_AREA);
+    const double sx = double(reduced.cols) / region.width, sy = double(reduced.rows) / region.height;
+    // Frame pixels -> reduced pixels (pixel centres map to pixel centres).
+    const cv::Matx33d to_reduced(sx, 0, (0.5 - region.x) * sx - 0.5, 0, sy, (0.5 - region.y) * sy - 0.5, 0, 0, 1);
+    const double reduced_per_unit = out.pixels_per_unit * std::sqrt(sx * sy);
+    const PixelModel model(ImageView(reduced), to_reduced * under, family, reduced_per_unit,
+                           cv::Point2d(smear.x * sx, smear.y * sy));
+    if (!model.valid()) return std::nullopt;
+    PixelModel::Reading r = model.read(sampled, reduced_per_unit, white - black);
+    r.smear *= out.pixels_per_unit / reduced_per_unit;  // frame pixels
+    return r;
   };
   if (deadline.passed()) return cut(out);
   const auto reading = read_id(h);

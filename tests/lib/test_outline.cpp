@@ -204,6 +204,28 @@ TEST(OutlineReading, FindsTheLengthOfAMotionBlur) {
     }
 }
 
+TEST(OutlineReading, ReadsLargeMarkersOnTheirPixelsReducedToThreePerUnit) {
+  // 3x3 and 4x4 at 2 m, turned: 6.6 and 5.3 px per unit, which the pixel model reads on
+  // the marker's pixels reduced to 3 px per unit. Sharp, and smeared by 4.8 units: read
+  // right, the smear's length found in units as at the frame's own resolution.
+  std::mt19937_64 rng(31);
+  DetectorParams params;
+  for (const int n : {3, 4})
+    for (const double units : {0.0, 4.8}) {
+      const TagId id = random_id(Family(n), rng);
+      const double per_unit = 0.47 * 28 / 2 * 24 / Family(n).side();  // the paper camera
+      const Far far = far_marker(n, id, 2, 25, units * per_unit);
+      const auto reading = read_outline(ImageView(far.scene.image), coarse(far.corners, 1, 1.0, rng), Family(n));
+      const std::string what = std::to_string(n) + "x" + std::to_string(n) + ", smear " + std::to_string(units);
+      ASSERT_TRUE(reading) << what;
+      EXPECT_GT(reading->pixels_per_unit, 4.5) << what;
+      EXPECT_TRUE(acceptable(*reading, params))
+          << what << ": evidence " << reading->evidence << ", margin " << reading->margin;
+      EXPECT_EQ(reading->id, id) << what;
+      EXPECT_NEAR(reading->smear, units, 0.8) << what;
+    }
+}
+
 TEST(OutlineReading, BlursAsLongAsTheCellPitchAreReadOrRefusedNeverMisread) {
   // A blur as long as the cells' 6-unit pitch leaves a square's one-unit shift visible in
   // most directions and cells, not in all: there the fit can move a square to its
