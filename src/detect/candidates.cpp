@@ -17,6 +17,7 @@ namespace {
 struct LevelHistogram {
   int count[256] = {};
   int total = 0;
+  LevelHistogram() = default;
   LevelHistogram(const RegionTree& tree, int region, const cv::Mat1b& image, cv::Point origin = {}) {
     const int x_end = origin.x + image.cols;
     tree.for_each_run(region, [&](int y, int x0, int x1) {
@@ -174,8 +175,21 @@ Blob BlobMeasurer::measure(const RegionTree& tree, int region, const ImageView& 
   return b;
 }
 
+std::optional<bool> pure_paper_even(const RegionTree& tree, int white_region, const BinaryImage& binary,
+                                    const ImageView& image) {
+  LevelHistogram pure;
+  tree.for_each_run(white_region, [&](int y, int x0, int x1) {
+    if (y < 2 || y + 2 >= image.height) return;
+    const std::uint8_t* row = image.data + std::ptrdiff_t(y) * image.stride;
+    for (int x = x0 + 2; x < x1 - 2; ++x)
+      if (!binary.black(x, y - 2) && !binary.black(x, y + 2)) ++pure.count[row[x]], ++pure.total;
+  });
+  if (pure.total < kMinEvenPaperPixels) return std::nullopt;
+  return pure.quantile(0.1) >= kEvenPaperShare * pure.quantile(0.9);
+}
+
 PaperLevel paper_under(const RegionTree& tree, int white_region, const int* kids, int count, const ImageView& image,
-                       int reach) {
+                       const BinaryImage& binary, int reach) {
   PaperLevel paper(white_level(tree, white_region, image));
   std::vector<int> areas;
   cv::Rect box;
@@ -190,6 +204,9 @@ PaperLevel paper_under(const RegionTree& tree, int white_region, const int* kids
   if (areas.empty()) return paper;
   std::nth_element(areas.begin(), areas.begin() + count / 2, areas.end());
   if (areas[std::size_t(count / 2)] < kMinLocalPaperArea) return paper;
+  // Most markers are evenly lit, and their pure paper shows it at a fraction of the
+  // closing's cost.
+  if (pure_paper_even(tree, white_region, binary, image).value_or(false)) return paper;
   // Closed by a square one pixel wider each way than the largest square's box.
   const int k = largest + 2;
   const int grow = reach + k;
@@ -209,6 +226,7 @@ PaperLevel paper_under(const RegionTree& tree, int white_region, const int* kids
     paper.local.release();
     return paper;
   }
+
   const LevelHistogram closed(tree, white_region, paper.local, paper.origin);
   // Scaled so that its upper quartile over the white region is the white region's own:
   // the lit paper is then measured against the level every other marker is.
@@ -330,7 +348,7 @@ void find_candidates(const RegionTree& tree, const BinaryImage& binary, const Im
     c.white_area = tree.regions[t.region].area * pixel_area;
     const int reach = params.dilation * patch.scale;
     const PaperLevel paper = params.centroid_reference == CentroidReference::local_white
-                                 ? paper_under(tree, t.region, k, n2, image, reach)
+                                 ? paper_under(tree, t.region, k, n2, image, binary, reach)
                                  : PaperLevel(255.0);
     c.paper = paper;
     if (patch.scale == 1)

@@ -337,7 +337,7 @@ TEST(FindCandidates, AMarkerIsOneCandidate) {
   std::vector<int> kids;
   for (const Blob& b : c.blobs) kids.push_back(b.region);
   const detail::PaperLevel paper =
-      detail::paper_under(a.tree, c.white_region, kids.data(), int(kids.size()), a.view(), 1);
+      detail::paper_under(a.tree, c.white_region, kids.data(), int(kids.size()), a.view(), a.binary, 1);
   EXPECT_TRUE(paper.local.empty());  // evenly lit: the white region's level everywhere
   EXPECT_EQ(paper.level, c.paper.level);
   for (const Blob& b : c.blobs) {
@@ -435,7 +435,7 @@ TEST(FindCandidates, EachSquaresInkIsMeasuredAgainstThePaperAroundIt) {
     kids.push_back(b.region);
   }
   const detail::PaperLevel paper =
-      detail::paper_under(a.tree, out[0].white_region, kids.data(), int(kids.size()), a.view(), 1);
+      detail::paper_under(a.tree, out[0].white_region, kids.data(), int(kids.size()), a.view(), a.binary, 1);
   ASSERT_FALSE(paper.local.empty());
   EXPECT_NEAR(paper.ink(30, 20, 120), 0, 1e-9);         // paper in the darkest band
   EXPECT_NEAR(paper.ink(60, 20, 90), level / 2, 1e-9);  // half the paper's light, in the middle band
@@ -458,7 +458,7 @@ TEST(FindCandidates, SmallSquaresAreMeasuredAgainstTheWhiteRegionsLevel) {
   std::vector<int> kids;
   for (const Blob& b : out[0].blobs) kids.push_back(b.region);
   const detail::PaperLevel paper =
-      detail::paper_under(a.tree, out[0].white_region, kids.data(), int(kids.size()), a.view(), 1);
+      detail::paper_under(a.tree, out[0].white_region, kids.data(), int(kids.size()), a.view(), a.binary, 1);
   EXPECT_TRUE(paper.local.empty());
   EXPECT_EQ(paper.level, out[0].paper.level);
 }
@@ -743,7 +743,8 @@ TEST(FindCandidates, ASquareAcrossAShadowsEdgeIsNotReadByItsBlobs) {
     for (int i = 0; i < int(a.tree.regions.size()); ++i)
       if (a.tree.regions[i].area >= 100 && a.tree.regions[i].area < 400) kids.push_back(i);
     const int white = a.tree.regions[region].parent;
-    const detail::PaperLevel local = detail::paper_under(a.tree, white, kids.data(), int(kids.size()), a.view(), 1);
+    const detail::PaperLevel local =
+        detail::paper_under(a.tree, white, kids.data(), int(kids.size()), a.view(), a.binary, 1);
     EXPECT_FALSE(local.local.empty());
     const detail::Blob with_local = detail::BlobMeasurer().measure(a.tree, region, a.view(), a.binary, 1, local);
     const detail::Blob flat =
@@ -760,4 +761,35 @@ TEST(FindCandidates, ASquareAcrossAShadowsEdgeIsNotReadByItsBlobs) {
   EXPECT_GT(over, detail::kMaxPaperShift);
   EXPECT_LT(over, 0.6);
   EXPECT_EQ(refused, 0u);
+}
+
+TEST(PaperUnder, TheLightIsTakenAsEvenBeforeTheClosingOnlyWhereThePurePaperShowsIt) {
+  // A 3x3 of 12 px squares on paper at 180 with noise of 3 grey levels: even. Lit in two
+  // bands (240 and 180, a shadow's edge: 0.75 of the light) or in a gradient down to
+  // 0.85 of the light: not (the closing decides those). Squares of 3 px: too few pixels
+  // out of a blur's reach to tell.
+  const auto verdict = [](const cv::Mat1b& grey, const cv::Mat1b& black) {
+    const Analysed a = analyse(grey, black);
+    DetectionStats stats;
+    const std::vector<Candidate> out = run(a, params_for({Family(3)}), stats);
+    EXPECT_EQ(out.size(), 1u);
+    return out.empty() ? std::nullopt : detail::pure_paper_even(a.tree, out[0].white_region, a.binary, a.view());
+  };
+  cv::Mat1b grey = boxed(100, 3, grid(12, 28, 12));
+  const cv::Mat1b black = grey == 0;
+  cv::Mat1b noisy = grey.clone(), banded = grey.clone(), graded = grey.clone();
+  cv::Mat1f noise(grey.size());
+  cv::RNG(7).fill(noise, cv::RNG::NORMAL, 0, 3);
+  for (int y = 8; y < 103; ++y)
+    for (int x = 8; x < 103; ++x) {
+      if (black(y, x)) continue;
+      noisy(y, x) = cv::saturate_cast<std::uint8_t>(180 + noise(y, x));
+      banded(y, x) = x < 55 ? 240 : 180;
+      graded(y, x) = cv::saturate_cast<std::uint8_t>(240 * (1 - 0.15 * (x - 8) / 95.0));
+    }
+  EXPECT_EQ(verdict(noisy, black), std::optional<bool>(true));
+  EXPECT_EQ(verdict(banded, black), std::optional<bool>(false));
+  EXPECT_EQ(verdict(graded, black), std::optional<bool>(false));
+  const cv::Mat1b small = boxed(22, 1, grid(4, 6, 3));
+  EXPECT_EQ(verdict(small, small == 0), std::nullopt);
 }
