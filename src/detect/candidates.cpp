@@ -226,7 +226,6 @@ PaperLevel paper_under(const RegionTree& tree, int white_region, const int* kids
     paper.local.release();
     return paper;
   }
-
   const LevelHistogram closed(tree, white_region, paper.local, paper.origin);
   // Scaled so that its upper quartile over the white region is the white region's own:
   // the lit paper is then measured against the level every other marker is.

@@ -280,14 +280,13 @@ constexpr int kMinLocalPaperArea = 25;
 // across a frame (0.4 across 1280 px: 6 % across a 200 px marker).
 constexpr double kMinPaperSpread = 0.8;
 // Before the closing, the paper between the squares where no blur of their edges reaches
-// is looked at (pure_paper_even): its
-// darkest tenth at kEvenPaperShare of its brightest tenth or more, over kMinEvenPaperPixels
-// pixels or more, and the light is taken as even without the closing. Set before any
-// measurement (noise of 3 grey levels on paper at 180 leaves 0.96; the field experiment's
-// low light, 6 on 70, 0.80, which the closing decides). On every frame of the field
-// experiment (3x3, 4x4 and 6x6, both sets) and of the video experiment (3x3) no candidate
-// it passed (7,377 and 2,089) had a closed level that varies, and it passed 72 % of those
-// the closing was taken for.
+// is looked at (pure_paper_even): where its darkest tenth is at kEvenPaperShare of its
+// brightest tenth or more, over kMinEvenPaperPixels pixels or more, the light is taken as
+// even without the closing. Set before any measurement (noise of 3 grey levels on paper
+// at 180 leaves 0.96; the field experiment's low light, 6 on 70, 0.80, which the closing
+// decides). On every frame of the field experiment (3x3, 4x4 and 6x6, both sets) and of
+// the video experiment (3x3) no candidate it passed (7,377 and 2,089) had a closed level
+// that varies, and it passed 72 % of those the closing was taken for.
 constexpr double kEvenPaperShare = 0.9;
 constexpr int kMinEvenPaperPixels = 50;
 // Where the paper is followed, each square's centroid is measured against the one level
