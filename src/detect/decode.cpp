@@ -81,6 +81,11 @@ cv::Matx22d units_to_pixels(const cv::Matx33d& h, cv::Point2d u) {
 // The local inverse of h at unit point u: pixels -> units.
 cv::Matx22d pixels_to_units(const cv::Matx33d& h, cv::Point2d u) { return units_to_pixels(h, u).inv(); }
 
+// The length in units of `off` (pixels), a blob's offset from unit point u under h.
+double offset_in_units(const cv::Matx33d& h, cv::Point2d u, cv::Point2d off) {
+  return cv::norm(pixels_to_units(h, u) * cv::Vec2d(off.x, off.y));
+}
+
 // The homography taking the unit square's corners (0, 0), (1, 0), (1, 1), (0, 1) to q[0]
 // .. q[3] (the projective map of a square onto a quadrilateral, in closed form); none when
 // three of the corners are collinear.
@@ -376,8 +381,7 @@ double read_digits(const Candidate& c, const CellCentres& design, const CellCent
     residual += nearest;
     if (!worst) continue;
     const cv::Point2d off = blob - projected[g][digit];
-    d.worst_cell =
-        std::max(d.worst_cell, cv::norm(pixels_to_units(d.homography, design[g][digit]) * cv::Vec2d(off.x, off.y)));
+    d.worst_cell = std::max(d.worst_cell, offset_in_units(d.homography, design[g][digit], off));
   }
   return residual;
 }
@@ -588,7 +592,7 @@ std::optional<double> read_bowed(const Candidate& c, const CellCentres& design, 
         if (e.dot(e) < nearest) nearest = e.dot(e), digit = v, off = e;
       }
       id = id.with_digit(f.data_index(g), digit);
-      worst = std::max(worst, cv::norm(pixels_to_units(d.homography, design[g][digit]) * cv::Vec2d(off.x, off.y)));
+      worst = std::max(worst, offset_in_units(d.homography, design[g][digit], off));
     }
     if (id == d.id) {
       d.worst_cell = worst;
@@ -854,13 +858,8 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     d.verdict = Verdict::accepted;
     return d;
   };
-  // 3x3: the id the sheet fits best over every id and plausible hypothesis, with its margin
-  // over the best other id there (half the root of how much worse it fits, over the
-  // scatter about the sheet): no rival is left unweighed. Only where a bend shows: the
-  // sheet's 3 depth terms take up more of the flat reading's misfit than Gaussian noise
-  // would but once in a hundred times (an F test: F(3, 7) at 0.99 is 8.45, for 3 depth
-  // terms and 18 - 11 degrees of freedom left; the scatter at least 0.02 px, as for the
-  // noise margin). Elsewhere the flat grid's verdict stands. `bent` tells whether it did.
+  // A reading's misfit on the flat grid, and whether a sheet's depth terms take up more of
+  // it than noise would (read_on_sheet, below).
   const auto flat_misfit_of = [&](const Decoding& d) {
     const std::vector<cv::Point2d> units = units_of(f, design, d.id);
     double misfit = 0;
@@ -875,6 +874,13 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     constexpr double kF3And7At99 = 8.45;
     return (flat_misfit - sheet_misfit) / 3 > kF3And7At99 * std::max(sheet_misfit / sheet_freedom, 0.02 * 0.02);
   };
+  // 3x3: the id the sheet fits best over every id and plausible hypothesis, with its margin
+  // over the best other id there (half the root of how much worse it fits, over the
+  // scatter about the sheet): no rival is left unweighed. Only where a bend shows: the
+  // sheet's 3 depth terms take up more of the flat reading's misfit than Gaussian noise
+  // would but once in a hundred times (an F test: F(3, 7) at 0.99 is 8.45, for 3 depth
+  // terms and 18 - 11 degrees of freedom left; the scatter at least 0.02 px, as for the
+  // noise margin). Elsewhere the flat grid's verdict stands. `bent` tells whether it did.
   const auto read_on_sheet = [&](const Decoding& flat, bool* bent = nullptr) -> std::optional<Decoding> {
     SheetFits fits;
     std::vector<const Decoding*> weighed;
@@ -898,8 +904,7 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
     for (int g = 0; g < f.cell_count(); ++g) {
       const int digit = f.is_baseline(g) ? 0 : d.id.digit(f.data_index(g));
       const cv::Point2d off = c.blobs[d.blob_of_cell[g]].point - bowed(f, sheet, design[g][digit]);
-      d.worst_cell =
-          std::max(d.worst_cell, cv::norm(pixels_to_units(d.homography, design[g][digit]) * cv::Vec2d(off.x, off.y)));
+      d.worst_cell = std::max(d.worst_cell, offset_in_units(d.homography, design[g][digit], off));
     }
     if (d.worst_cell > params.max_cell_residual) return std::nullopt;
     const double spread = std::max(std::sqrt(fits.best_misfit / sheet_freedom), 0.02);
