@@ -443,7 +443,7 @@ struct Bow {
 // Parameters fitted in all, with the homography's.
 int bow_parameters(bool sheet) { return sheet ? 11 : 14; }
 // The bow's own coefficients: b's 12 terms, or a sheet's 6 affine and 3 depth terms.
-int bow_coefficients(bool sheet) { return sheet ? 9 : 12; }
+constexpr int bow_coefficients(bool sheet) { return sheet ? 9 : 12; }
 
 // A bow of shape `sheet` under h, not yet fitted. The sheet's normal needs the camera: h
 // maps units to ideal pixels, so K^-1 h holds the sheet's axes (scaled alike).
@@ -629,7 +629,8 @@ struct SheetFits {
 void weigh_sheet_ids(const Candidate& c, const CellCentres& design, const Camera& camera, const Decoding& from,
                      SheetFits& fits) {
   const Family& f = c.family;
-  constexpr int cells = 9, rows = 2 * cells, coefficients = 9, left = rows - coefficients, digits = cells - 2;
+  constexpr int cells = 9, rows = 2 * cells, coefficients = bow_coefficients(true), left = rows - coefficients,
+                digits = cells - 2;
   using Offsets = Eigen::Matrix<double, left, 1>;
   const Bow sheet = unfitted_bow(f, from.homography, camera);
   cv::Mat1d shifts(rows, coefficients), w, u, vt;
@@ -679,23 +680,21 @@ void weigh_sheet_ids(const Candidate& c, const CellCentres& design, const Camera
   }
   std::array<int, digits> digit{};
   const auto visit = [&](const auto& self, int k, const Offsets& sum) -> void {
-    if (k == digits) {
-      const double misfit = sum.squaredNorm();
-      if (misfit < fits.second_misfit) {
-        TagId id;
-        for (int j = 0; j < digits; ++j) id = id.with_digit(f.data_index(cell[j]), digit[j]);
-        fits.offer(id, misfit, &from);
-      }
-      return;
-    }
     std::array<std::pair<double, int>, 4> order;
     for (int v = 0; v < 4; ++v) order[std::size_t(v)] = {(sum + term[k][v] + centre_sum[k + 1]).squaredNorm(), v};
     std::sort(order.begin(), order.end());
     for (const auto& [distance, v] : order) {
+      digit[std::size_t(k)] = v;
+      if (k + 1 == digits) {  // the last digit: `distance` is the pattern's misfit
+        if (distance >= fits.second_misfit) break;
+        TagId id;
+        for (int j = 0; j < digits; ++j) id = id.with_digit(f.data_index(cell[j]), digit[j]);
+        fits.offer(id, distance, &from);
+        continue;
+      }
       // (1 - 1e-9): the bound kept below the misfits it bounds whatever their rounding.
       const double reach = std::max(0.0, std::sqrt(distance) - spread_sum[k + 1]);
       if (reach * reach * (1 - 1e-9) >= fits.second_misfit) break;
-      digit[std::size_t(k)] = v;
       self(self, k + 1, Offsets(sum + term[k][v]));
     }
   };
@@ -1039,13 +1038,12 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   // straight. A bent 3x3 was read as another id so: the printed id's hypothesis left 1.8
   // times that reading's residual, but its edge under its homography was the weaker. At
   // min_decode_margin 1 neither check refuses anything.
-  if (f.n() > 2) {
+  if (f.n() > 2 && params.min_decode_margin > 1) {
     double own = std::numeric_limits<double>::infinity();
     for (const Reading& r : readings)
       if (r.d.id == best.id) own = std::min(own, r.residual);
     for (const Reading& r : readings)
-      if (params.min_decode_margin > 1 && r.passes && r.d.id != best.id &&
-          r.residual < params.min_decode_margin * own) {
+      if (r.passes && r.d.id != best.id && r.residual < params.min_decode_margin * own) {
         best.verdict = Verdict::margin;
         return refused(best);
       }
