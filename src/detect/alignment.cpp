@@ -53,9 +53,11 @@ std::optional<double> EccAlignment::align(const cv::Mat1f& templ, cv::Matx33f& w
   std::vector<std::uint8_t> inside(pixels);
   // A row's columns: the Jacobian of the warped image in the warp's 8 parameters (in the
   // order m00 m10 m20 m01 m11 m21 m02 m12), the zero-mean image and the zero-mean template.
-  // Their Gram matrix holds the Hessian, both projections and the correlation.
+  // Their Gram matrix holds the Hessian, both projections and the correlation; it is
+  // symmetric, so only its lower triangle is summed (a row's 55 dot products).
   using Columns = Eigen::Matrix<float, Eigen::Dynamic, 10>;
   Columns columns(ws, 10);
+  Eigen::Matrix<float, 10, 10> row_gram = Eigen::Matrix<float, 10, 10>::Zero();
 
   double rho = -1, last_rho = -min_change;
   for (int step = 1; step <= max_steps && std::abs(rho - last_rho) >= min_change; ++step) {
@@ -117,8 +119,12 @@ std::optional<double> EccAlignment::align(const cv::Mat1f& templ, cv::Matx33f& w
         columns.row(x) << xf * gx, xf * gy, xf * along, yf * gx, yf * gy, yf * along, gx, gy,
             inside[k] ? warped[k][0] - float(mean_i) : warped[k][0], inside[k] ? trow[x] - float(mean_t) : 0.0f;
       }
-      gram.noalias() += (columns.transpose() * columns).cast<double>();
+      for (int j = 0; j < 10; ++j)
+        for (int i = j; i < 10; ++i) row_gram(i, j) = columns.col(i).dot(columns.col(j));
+      gram += row_gram.cast<double>();
     }
+    for (int j = 1; j < 10; ++j)
+      for (int i = 0; i < j; ++i) gram(i, j) = gram(j, i);
     const Eigen::Matrix<double, 8, 8> hessian = gram.topLeftCorner<8, 8>();
     const Eigen::Matrix<double, 8, 1> image_projection = gram.block<8, 1>(0, 8);
     const Eigen::Matrix<double, 8, 1> template_projection = gram.block<8, 1>(0, 9);

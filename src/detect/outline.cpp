@@ -1424,8 +1424,22 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       if (const double c = SparseTemplate(*templ, 3, in_template).correlation(crop, warp); c > best)
         best = c, best_along = along;
     };
-    for (int a = 0; a < 8; ++a)
-      for (double units = 1.5; units <= kLongestSmearSought; units += 1.5) try_smear(a * CV_PI / 8, units);
+    // The grid's lengths of one direction share their samples (SparseTemplate::smeared):
+    // a smear's image in the template is linear in its length.
+    for (int a = 0; a < 8; ++a) {
+      const cv::Point2d unit_along = cv::Point2d(std::cos(a * CV_PI / 8), std::sin(a * CV_PI / 8)) * crop_per_unit;
+      const cv::Point2d per_unit_in_template = template_smear(warp, unit_along);
+      const double stretch = cv::norm(per_unit_in_template);
+      if (stretch == 0) continue;
+      std::vector<double> units, lengths;  // units of the marker, template pixels
+      for (double u = 1.5; u <= kLongestSmearSought; u += 1.5)
+        if (template_smear(warp, unit_along * u) != cv::Point2d()) units.push_back(u), lengths.push_back(u * stretch);
+      if (lengths.empty()) continue;
+      const std::vector<SparseTemplate> grid =
+          SparseTemplate::smeared(*templ, 3, per_unit_in_template / stretch, lengths);
+      for (std::size_t k = 0; k < grid.size(); ++k)
+        if (const double c = grid[k].correlation(crop, warp); c > best) best = c, best_along = unit_along * units[k];
+    }
     if (best_along != cv::Point2d()) {
       const double angle = std::atan2(best_along.y, best_along.x), units = cv::norm(best_along) / crop_per_unit;
       for (const double da : {-CV_PI / 16, 0.0, CV_PI / 16})
