@@ -642,9 +642,8 @@ void weigh_sheet_ids(const Candidate& c, const CellCentres& design, const Camera
   }
   // An orthonormal basis of the shifts' span, then of what lies off it (Gram-Schmidt,
   // each vector cleared twice against those before it): the last `left` vectors are the
-  // coordinates the misfits are measured in. (A full SVD of the shifts gave such a basis
-  // for several times the cost: a tenth of a tracked frame of bent 3x3 sheets. Eigen's
-  // Householder QR trips GCC 12's -Wmaybe-uninitialized.)
+  // coordinates the misfits are measured in. (Several times cheaper than a full SVD;
+  // Eigen's Householder QR trips GCC 12's -Wmaybe-uninitialized.)
   Eigen::Matrix<double, rows, rows> basis;
   int spanned = 0;
   const auto extend = [&](Column v, double least) {
