@@ -28,6 +28,15 @@ inline cv::Point2d polygon_centroid(const std::vector<cv::Point2d>& poly) {
   return {cx / (3 * a), cy / (3 * a)};
 }
 
+// Where the diagonals of a quadrilateral cross: the image of a planar square's centre.
+// The vertices' mean when they are parallel (a degenerate quadrilateral).
+inline cv::Point2d diagonals_crossing(const std::array<cv::Point2d, 4>& q) {
+  const cv::Point2d a = q[2] - q[0], b = q[3] - q[1];
+  const double d = a.cross(b);
+  if (d == 0) return (q[0] + q[1] + q[2] + q[3]) / 4;
+  return q[0] + a * ((q[1] - q[0]).cross(b) / d);
+}
+
 // Signed area of a quadrilateral (shoelace): positive when its vertices run clockwise on
 // screen (y down).
 inline double quad_area(const std::array<cv::Point2d, 4>& q) {

@@ -30,7 +30,6 @@
 namespace lftag::detail {
 namespace {
 
-constexpr double kGrow = 0.5;  // units round the square
 // Below this many pixels per unit the window's half unit is under 0.6 px, and which
 // pixels it holds weighs more than the ink in them: the blobs' centroids are then better
 // (measured on 22 to 40 px markers, with and without defocus).
@@ -82,14 +81,16 @@ Quad observed_quad(const UnitRect& r, double grow, const cv::Matx33d& homography
 }  // namespace
 
 std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
-                                        const cv::Matx33d& homography, const PaperLevel& paper_level) {
+                                        const cv::Matx33d& homography, const PaperLevel& paper_level,
+                                        std::vector<CellInk>* inks, double grow, double ring_units) {
   const double side = family.side();
   if (!(smallest_scale(homography, {side / 2, side / 2}) >= kMinPixelsPerUnit)) return {};
   std::vector<cv::Point2d> out;
+  if (inks) inks->clear();
   for (int g = 0; g < family.cell_count(); ++g) {
     const UnitRect s = family.square(g, family.is_baseline(g) ? 0 : id.digit(family.data_index(g)));
-    const Quad window = observed_quad(s, kGrow, homography, camera, image);
-    const Quad paper = observed_quad(s, 2 * kGrow, homography, camera, image);
+    const Quad window = observed_quad(s, grow, homography, camera, image);
+    const Quad paper = observed_quad(s, grow + ring_units, homography, camera, image);
     // A window cut by the frame's edge would lose ink on one side.
     if (!window.inside || !paper.inside) return {};
 
@@ -137,6 +138,7 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
     }
     if (m <= 0) return {};
     out.emplace_back(mx / m, my / m);
+    if (inks) inks->push_back({m, double(white)});
   }
   return out;
 }

@@ -92,7 +92,7 @@ DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   angle += o.angle, collinearity += o.collinearity, residual += o.residual, unambiguous += o.unambiguous;
   decoded += o.decoded, bowed += o.bowed, second_looks += o.second_looks, second_look_found += o.second_look_found;
   outline_reads += o.outline_reads, outline_found += o.outline_found, outline_reads_skipped += o.outline_reads_skipped;
-  expected_reads += o.expected_reads, expected_found += o.expected_found;
+  expected_reads += o.expected_reads, expected_found += o.expected_found, expected_measured += o.expected_measured;
   borders += o.borders, border_found += o.border_found, borders_ms += o.borders_ms;
   skipped_by_budget += o.skipped_by_budget, second_looks_skipped += o.second_looks_skipped;
   past_deadline += o.past_deadline, skipped_by_deadline += o.skipped_by_deadline;
@@ -125,6 +125,38 @@ bool already_found(const std::vector<Detection>& found, cv::Point2d q) {
     const std::vector<cv::Point2f> outline(f.corners.begin(), f.corners.end());
     return cv::pointPolygonTest(outline, cv::Point2f(q), false) >= 0;
   });
+}
+
+// The detection of a decoded candidate, posed from each square's ink over its window
+// under the decoding's homography, unbiased by defocus (cell_centroids.cpp; the blobs'
+// centroids for a marker under 1.25 px per unit or by the frame's edge) and from the
+// border's stroke. None when no pose could be computed.
+std::optional<Detection> pose_decoded(const detail::Candidate& c, const detail::Decoding& d, const detail::KeyPoints& k,
+                                      const ImageView& work, const Camera& camera, const DetectorParams& p,
+                                      const detail::BorderEdges& edges, bool centroids_final = false) {
+  Detection det;
+  det.family = c.family;
+  det.id = d.id;
+  det.decode_error = d.error;
+  det.worst_cell = d.worst_cell;
+  det.noise_margin = d.noise_margin;
+  det.ink_spread = d.ink_spread;
+  det.edge_score = d.edge_score;
+  detail::Candidate for_pose = c;
+  const std::vector<cv::Point2d> cells =
+      centroids_final ? std::vector<cv::Point2d>{}
+                      : detail::cell_centroids(work, camera, c.family, d.id, d.homography, c.paper);
+  if (!cells.empty()) {
+    const std::vector<cv::Point2d> ideal = camera.undistort(cells);
+    for (int g = 0; g < c.family.cell_count(); ++g) {
+      detail::Blob& b = for_pose.blobs[d.blob_of_cell[g]];
+      b.centroid = cells[g], b.point = ideal[g];
+    }
+  }
+  for (int g = 0; g < c.family.cell_count(); ++g) det.centroids.push_back(for_pose.blobs[d.blob_of_cell[g]].centroid);
+  for (int i = 0; i < 4; ++i) det.keypoints[i] = for_pose.blobs[k.blob[i]].centroid;
+  if (!detail::estimate_pose(for_pose, d, camera, p, det, edges)) return std::nullopt;
+  return det;
 }
 
 // Key points, decoding and pose of every candidate, most plausible first, until the
@@ -213,41 +245,13 @@ void decode_candidates(const std::vector<detail::Candidate>& candidates, const I
     ++stats.decoded;
 
     start = Clock::now();
-    Detection det;
-    det.family = c.family;
-    det.id = d->id;
-    det.decode_error = d->error;
-    det.worst_cell = d->worst_cell;
-    det.noise_margin = d->noise_margin;
-    det.ink_spread = d->ink_spread;
-    det.edge_score = d->edge_score;
-    // The pose's centroids: each square's ink over its window under the decoding's
-    // homography, unbiased by defocus (cell_centroids.cpp); the blobs' for a marker under
-    // 1.25 px per unit or by the frame's edge.
-    detail::Candidate for_pose = c;
-    const std::vector<cv::Point2d> cells =
-        detail::cell_centroids(work, camera, c.family, d->id, d->homography, c.paper);
-    if (!cells.empty()) {
-      const std::vector<cv::Point2d> ideal = camera.undistort(cells);
-      for (int g = 0; g < c.family.cell_count(); ++g) {
-        detail::Blob& b = for_pose.blobs[d->blob_of_cell[g]];
-        b.centroid = cells[g], b.point = ideal[g];
-      }
-    }
-    for (int g = 0; g < c.family.cell_count(); ++g)
-      det.centroids.push_back(for_pose.blobs[d->blob_of_cell[g]].centroid);
-    for (int i = 0; i < 4; ++i) det.keypoints[i] = for_pose.blobs[k->blob[i]].centroid;
-    const bool posed = detail::estimate_pose(for_pose, *d, camera, p, det,
-                                             detail::border_edges(work, camera, c.family, d->homography, p.tag_size));
+    std::optional<Detection> det = pose_decoded(
+        c, *d, *k, work, camera, p, detail::border_edges(work, camera, c.family, d->homography, p.tag_size));
     stats.pose_ms += elapsed_ms(start);
-    Stage outcome = Stage::detected;
-    if (!posed)
-      outcome = Stage::pose;
-    else if (already_found(found, det.center))
-      outcome = Stage::duplicate;
+    const Stage outcome = !det ? Stage::pose : already_found(found, det->center) ? Stage::duplicate : Stage::detected;
     if (trace) trace->verdicts.back().stage = outcome;
     if (outcome != Stage::detected) continue;
-    found.push_back(std::move(det));
+    found.push_back(std::move(*det));
   }
 }
 
@@ -515,7 +519,23 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
   const auto is_expected = [](const ExpectedMarker& e, const Detection& d) {
     return d.family == e.family && d.id == e.id;
   };
-  for (const ExpectedMarker& e : expected) {
+  // The camera's own shake moves every marker alike, and no track's motion foresees it:
+  // the markers of the frame found so far say how far it took them from where their
+  // tracks put them, and the grey-level measurement of the next starts that much further on.
+  const auto shake = [&](std::size_t upto) {
+    cv::Point2d sum;
+    int count = 0;
+    for (std::size_t i = 0; i < upto; ++i) {
+      const auto it =
+          std::find_if(found.begin(), found.end(), [&](const Detection& d) { return is_expected(expected[i], d); });
+      if (it == found.end()) continue;
+      sum += it->center - detail::diagonals_crossing(expected[i].corners);
+      ++count;
+    }
+    return count > 0 ? sum / count : cv::Point2d();
+  };
+  for (std::size_t index = 0; index < expected.size(); ++index) {
+    const ExpectedMarker& e = expected[index];
     const bool sought = std::find(p.families.begin(), p.families.end(), e.family) != p.families.end();
     const bool present = std::any_of(found.begin(), found.end(), [&](const Detection& d) { return is_expected(e, d); });
     if (!sought || present) continue;
@@ -530,9 +550,23 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
     cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>(e.corners.begin(), e.corners.end()));
     const int grow = std::max(box.width, box.height) / 8;
     box = cv::Rect(box.x - grow, box.y - grow, box.width + 2 * grow, box.height + 2 * grow);
+    // A marker that stayed sharp is measured where expected from the grey levels alone
+    // (tracked.cpp), without the patch's threshold, regions and blobs.
+    std::array<cv::Point2d, 4> shaken = e.corners;
+    for (cv::Point2d& corner : shaken) corner += shake(index);
+    if (std::optional<detail::TrackedMeasurement> m =
+            detail::measure_tracked(work, camera, p, e.family, e.id, shaken, stats)) {
+      std::optional<Detection> det =
+          pose_decoded(m->candidate, m->decoding, m->keypoints, work, camera, p, m->edges, true);
+      if (det && !already_found(found, det->center)) {
+        ++stats.decoded, ++stats.expected_found, ++stats.expected_measured;
+        found.push_back(std::move(*det));
+        continue;
+      }
+    }
     detail::SecondLook look;
     look.sought.reset().set(e.family.n());
-    // A marker that stayed sharp is found as the search found it, at a fraction of a
+    // Otherwise a marker that stayed sharp is found as the search found it, at a fraction of a
     // second look's cost (no enlarged patch, no local extremes); a blurred or shadowed one
     // by the second look.
     bool taken = false;

@@ -25,6 +25,7 @@
 //   (not in the paper)        second_look, min_pixels_per_unit  coarse_outlines, read_outline,
 //                                                               acceptable (outline.cpp)
 //   (not in the paper)        max_candidates (the budget)       find_candidates (candidates.cpp)
+//   (not in the paper)        FrameHints (a track's outline)    measure_tracked (tracked.cpp)
 #pragma once
 
 #include <algorithm>
@@ -677,9 +678,17 @@ double elapsed_ms(std::chrono::steady_clock::time_point start);
 // the ink weighed against the median grey of the ring half a unit further out, or where
 // `paper` has a local level (a shadow across the marker), against the paper under each
 // pixel; empty when the marker has under 1.25 pixels per unit, or a window is not wholly
-// inside the image or holds no ink.
+// inside the image or holds no ink. `inks`, when not null, receives each square's ink.
+struct CellInk {
+  double mass = 0;   // the ink over the window (the zeroth moment its centroid divides by)
+  double paper = 0;  // the ring's median grey
+};
+// `grow`: the units each window adds round its square (half the narrowest gap, 2 units,
+// unless a caller needs to reach further); `ring_units`: the width of the ring round it.
 std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
-                                        const cv::Matx33d& homography, const PaperLevel& paper = {});
+                                        const cv::Matx33d& homography, const PaperLevel& paper = {},
+                                        std::vector<CellInk>* inks = nullptr, double grow = 0.5,
+                                        double ring_units = 0.5);
 
 // ---------------------------------------------------------------- border_edges.cpp
 // A point of the border's stroke, seen: the marker-frame point `object` on the stroke's
@@ -702,6 +711,22 @@ struct BorderEdges {
 // units, and none where the stroke has no white margin beside it.
 BorderEdges border_edges(const ImageView& image, const Camera& camera, const Family& family,
                          const cv::Matx33d& homography, double tag_size);
+
+// ---------------------------------------------------------------- tracked.cpp
+// A marker expected with `id` under `outline` (outer corners, frame pixels as observed),
+// measured there from the grey levels alone, ready to be posed: its squares' centroids as
+// the candidate's blobs (grid order), its key points, its decoding and its border's
+// stroke. None unless the outline settles on the squares, the paper round them is evenly
+// lit and they decode as `id`.
+struct TrackedMeasurement {
+  Candidate candidate;
+  KeyPoints keypoints;
+  Decoding decoding;
+  BorderEdges edges;
+};
+std::optional<TrackedMeasurement> measure_tracked(const ImageView& image, const Camera& camera,
+                                                  const DetectorParams& params, const Family& family, TagId id,
+                                                  const std::array<cv::Point2d, 4>& outline, DetectionStats& stats);
 
 // ---------------------------------------------------------------- pose.cpp
 // Final pose from all n^2 centroids and, when given, the border's stroke; fills the pose

@@ -730,42 +730,78 @@ TEST(Detector, ExpectedMarkersAreReadWhereExpected) {
   EXPECT_EQ(wrong, 0);
 }
 
-// A sharp marker read where expected is read as the search reads it (the frame's own
-// threshold, at its resolution): the same centroids and pose, so that a track's poses do
-// not change with the frames that were searched.
-TEST(Detector, ASharpExpectedMarkerIsReadAsTheSearchReadsIt) {
+// A tilted sharp marker `distance` m away, found by the search, then read where it is
+// expected (2 px right of and 1 px below where it is, as a track might predict it):
+// the largest distance between the two readings' squares' centroids, pixels, and
+// between their positions, as a share of the distance; and whether the read measured
+// the marker from the grey levels alone (stats.expected_measured).
+struct ReadAgain {
+  double centroids = 0, position = 0;
+  bool measured = false;
+};
+ReadAgain search_then_read_where_expected(int n, double distance) {
   SceneParams p;
   p.camera = paper_camera();
   p.noise_sigma = 2;
+  SceneMarker m;
+  m.family = Family(n);
+  m.id = TagId(4321);
+  m.tag_size = 0.25;
+  m.tvec = {0.1, 0.05, distance};
+  m.rvec = rotation(20, 35, -10);
+  const RenderedScene scene = render_scene(p, {m});
+  DetectorParams params;
+  params.families = {m.family};
+  params.camera = paper_camera();
+  params.tag_size = 0.25;
+  Detector detector(params);
+  const std::vector<Detection> searched = detector.detect(ImageView(scene.image));
+  EXPECT_EQ(searched.size(), 1u) << n;
+  FrameHints hints;
+  hints.full_search = false;
+  ExpectedMarker expected;
+  expected.family = m.family;
+  expected.id = m.id;
+  for (int k = 0; k < 4; ++k) expected.corners[k] = scene.truth[0].corners[k] + cv::Point2d(2, 1);
+  hints.expected.assign(1, expected);
+  DetectionStats stats;
+  const std::vector<Detection> read = detector.detect(ImageView(scene.image), hints, &stats);
+  EXPECT_EQ(read.size(), 1u) << n;
+  ReadAgain out;
+  out.centroids = out.position = HUGE_VAL;
+  if (searched.size() != 1 || read.size() != 1 || read[0].id != m.id) return out;
+  EXPECT_FALSE(searched[0].from_outline) << n;
+  out.centroids = 0;
+  for (std::size_t i = 0; i < read[0].centroids.size(); ++i)
+    out.centroids = std::max(out.centroids, cv::norm(read[0].centroids[i] - searched[0].centroids[i]));
+  out.position = cv::norm(read[0].tvec - searched[0].tvec) / cv::norm(searched[0].tvec);
+  out.measured = stats.expected_measured == 1;
+  return out;
+}
+
+// A sharp marker too small for its squares' windows (under 1.25 px a unit, 32 px across)
+// read where expected is read as the search reads it (the frame's own threshold, at its
+// resolution): the same centroids and pose, so that a track's poses do not change with
+// the frames that were searched.
+TEST(Detector, ASharpExpectedMarkerIsReadAsTheSearchReadsIt) {
   for (const int n : {3, 4}) {
-    SceneMarker m;
-    m.family = Family(n);
-    m.id = TagId(4321);
-    m.tag_size = 0.25;
-    m.tvec = {0.1, 0.05, 2.5};
-    m.rvec = rotation(20, 35, -10);
-    const RenderedScene scene = render_scene(p, {m});
-    DetectorParams params;
-    params.families = {m.family};
-    params.camera = paper_camera();
-    params.tag_size = 0.25;
-    Detector detector(params);
-    const std::vector<Detection> searched = detector.detect(ImageView(scene.image));
-    ASSERT_EQ(searched.size(), 1u) << n;
-    ASSERT_FALSE(searched[0].from_outline) << n;
-    FrameHints hints;
-    hints.full_search = false;
-    ExpectedMarker expected;
-    expected.family = m.family;
-    expected.id = m.id;
-    for (int k = 0; k < 4; ++k) expected.corners[k] = scene.truth[0].corners[k] + cv::Point2d(2, 1);
-    hints.expected.assign(1, expected);
-    const std::vector<Detection> read = detector.detect(ImageView(scene.image), hints);
-    ASSERT_EQ(read.size(), 1u) << n;
-    ASSERT_EQ(read[0].centroids.size(), searched[0].centroids.size()) << n;
-    for (std::size_t i = 0; i < read[0].centroids.size(); ++i)
-      EXPECT_LT(cv::norm(read[0].centroids[i] - searched[0].centroids[i]), 1e-9) << n << ", square " << i;
-    EXPECT_LT(cv::norm(read[0].tvec - searched[0].tvec), 1e-9) << n;
+    const ReadAgain r = search_then_read_where_expected(n, 2.5);
+    EXPECT_FALSE(r.measured) << n;
+    EXPECT_LT(r.centroids, 1e-9) << n;
+    EXPECT_LT(r.position, 1e-9) << n;
+  }
+}
+
+// A sharp marker large enough for its squares' windows (80 px across) is measured where
+// expected from the grey levels alone, without its patch's threshold and regions: the
+// same squares' centroids as the search's within a few hundredths of a pixel, and the
+// same position within a tenth of a percent.
+TEST(Detector, ALargerExpectedMarkerIsMeasuredFromTheGreyLevelsAsTheSearchMeasuresIt) {
+  for (const int n : {3, 4}) {
+    const ReadAgain r = search_then_read_where_expected(n, 1.0);
+    EXPECT_TRUE(r.measured) << n;
+    EXPECT_LT(r.centroids, 0.03) << n;
+    EXPECT_LT(r.position, 1e-3) << n;
   }
 }
 

@@ -49,6 +49,7 @@ struct DetectionStats {
   std::int64_t border_found = 0;           // detections read from them
   std::int64_t expected_reads = 0;         // expected markers (FrameHints) looked for where expected
   std::int64_t expected_found = 0;         // detections found so
+  std::int64_t expected_measured = 0;      // of them, measured from the grey levels alone (no patch searched)
   std::int64_t skipped_by_budget = 0;      // candidates not decoded: DetectorParams::max_candidates was spent
   std::int64_t second_looks_skipped = 0;   // clusters not looked at again: max_second_looks or the budget
   std::int64_t past_deadline = 0;          // frames whose deadline (DetectorParams::deadline_ms) cut their second looks
