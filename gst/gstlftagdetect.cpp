@@ -996,9 +996,10 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
   ++st.analysed;
   GST_LOG_OBJECT(self,
                  "%" G_GSIZE_FORMAT " markers at %" GST_TIME_FORMAT " (%s; %" G_GINT64_FORMAT " of %" G_GSIZE_FORMAT
-                 " tracked markers read where predicted)",
+                 " tracked markers read where predicted, %" G_GINT64_FORMAT " of them from the grey levels alone)",
                  detections.size(), GST_TIME_ARGS(GST_BUFFER_PTS(buffer)),
-                 hints.full_search ? "searched" : "not searched", stats.expected_found, hints.expected.size());
+                 hints.full_search ? "searched" : "not searched", stats.expected_found, hints.expected.size(),
+                 stats.expected_measured);
   if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0 || stats.outline_reads_skipped > 0) &&
       !st.warned_budget) {
     const std::string text = gst_lftag_detect_budget_text(stats, st.detector->params());

@@ -130,7 +130,8 @@ bool already_found(const std::vector<Detection>& found, cv::Point2d q) {
 // The detection of a decoded candidate, posed from each square's ink over its window
 // under the decoding's homography, unbiased by defocus (cell_centroids.cpp; the blobs'
 // centroids for a marker under 1.25 px per unit or by the frame's edge) and from the
-// border's stroke. None when no pose could be computed.
+// border's stroke. `centroids_final`: the candidate's blobs are those windows' centroids
+// already (a tracked marker's, tracked.cpp). None when no pose could be computed.
 std::optional<Detection> pose_decoded(const detail::Candidate& c, const detail::Decoding& d, const detail::KeyPoints& k,
                                       const ImageView& work, const Camera& camera, const DetectorParams& p,
                                       const detail::BorderEdges& edges, bool centroids_final = false) {
