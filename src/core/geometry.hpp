@@ -28,6 +28,12 @@ inline cv::Point2d polygon_centroid(const std::vector<cv::Point2d>& poly) {
   return {cx / (3 * a), cy / (3 * a)};
 }
 
+// The image of point p under the homography h.
+inline cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
+  const cv::Vec3d q = h * cv::Vec3d(p.x, p.y, 1);
+  return {q[0] / q[2], q[1] / q[2]};
+}
+
 // Where the diagonals of a quadrilateral cross: the image of a planar square's centre.
 // The vertices' mean when they are parallel (a degenerate quadrilateral).
 inline cv::Point2d diagonals_crossing(const std::array<cv::Point2d, 4>& q) {

@@ -16,6 +16,7 @@
 
 #include <Eigen/Dense>
 
+#include "../core/geometry.hpp"
 #include "stages.hpp"
 
 namespace lftag::detail {
@@ -57,11 +58,6 @@ constexpr double kMaxSpread = 0.65;
 // Points further than this many times the side's RMS distance from its line are dropped.
 constexpr double kOutlier = 3;
 constexpr double kLeastScatter = 0.02;  // pixels: a sharp rendered stroke's scatter
-
-cv::Point2d apply(const cv::Matx33d& h, cv::Point2d u) {
-  const cv::Vec3d p = h * cv::Vec3d(u.x, u.y, 1);
-  return {p[0] / p[2], p[1] / p[2]};
-}
 
 // The least-squares line through `points`: a point on it and its unit direction.
 struct Line {

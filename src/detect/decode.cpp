@@ -13,6 +13,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "../core/geometry.hpp"
 #include "stages.hpp"
 
 namespace lftag::detail {
@@ -65,11 +66,6 @@ void distort(const Camera& camera, std::vector<cv::Point2d>& points) {
 }
 
 namespace {
-
-cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
-  const cv::Vec3d q = h * cv::Vec3d(p.x, p.y, 1.0);
-  return {q[0] / q[2], q[1] / q[2]};
-}
 
 // The Jacobian of h at unit point u (central differences): units -> pixels.
 cv::Matx22d units_to_pixels(const cv::Matx33d& h, cv::Point2d u) {

@@ -352,11 +352,6 @@ cv::Matx33d unit_to_template() {
   return {kTemplateScale, 0, o, 0, kTemplateScale, o, 0, 0, 1};
 }
 
-cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
-  const cv::Vec3d q = h * cv::Vec3d(p.x, p.y, 1);
-  return {q[0] / q[2], q[1] / q[2]};
-}
-
 // Mean grey level over the unit rectangle [x, x + w) x [y, y + h) under h.
 double mean_level(const ImageView& image, const cv::Matx33d& h, double x, double y, double w, double hh) {
   constexpr double kStep = 0.25;

@@ -32,11 +32,6 @@ constexpr double kRing = 0.5;  // the paper's ring round each window, units (as 
 // prediction that takes longer is too far off for the windows; the patch's search finds it.
 constexpr int kMaxRefits = 3;
 constexpr double kCoarseSettled = 0.2, kSettled = 0.05;
-cv::Point2d apply(const cv::Matx33d& h, cv::Point2d u) {
-  const cv::Vec3d p = h * cv::Vec3d(u.x, u.y, 1);
-  return {p[0] / p[2], p[1] / p[2]};
-}
-
 }  // namespace
 
 std::optional<TrackedMeasurement> measure_tracked(const ImageView& image, const Camera& camera,

@@ -11,6 +11,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "../../src/core/geometry.hpp"
 #include "binary.hpp"
 #include "lftag/detector.hpp"
 #include "lftag/render.hpp"
@@ -18,17 +19,13 @@
 #include "stages.hpp"
 
 using namespace lftag;
+using lftag::detail::apply;
 using lftag::detail::Blob;
 using lftag::detail::Candidate;
 using lftag::detail::Decoding;
 using lftag::detail::KeyPoints;
 
 namespace {
-
-cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
-  const cv::Vec3d q = h * cv::Vec3d(p.x, p.y, 1);
-  return {q[0] / q[2], q[1] / q[2]};
-}
 
 // The one candidate of `family` in a rendered image, by the stages before decoding (a
 // global threshold halfway between ink and paper, so that the threshold stage's own

@@ -13,9 +13,11 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include "../../src/core/geometry.hpp"
 #include "stages.hpp"
 
 using namespace lftag;
+using lftag::detail::apply;
 using lftag::detail::Blob;
 using lftag::detail::Candidate;
 using lftag::detail::KeyPoints;
@@ -23,11 +25,6 @@ using lftag::detail::KeyPoints;
 namespace {
 
 using Quad = std::array<int, 4>;
-
-cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
-  const cv::Vec3d q = h * cv::Vec3d(p.x, p.y, 1);
-  return {q[0] / q[2], q[1] / q[2]};
-}
 
 // Units -> pixels for a marker of `family` seen by a pinhole camera (f = 800, principal
 // point (320, 240)) at `distance` marker sides, turned `roll` in its plane, then tilted

@@ -52,11 +52,6 @@ std::array<cv::Point2d, 4> coarse(const std::array<cv::Point2d, 4>& corners, int
   return out;
 }
 
-cv::Point2d apply(const cv::Matx33d& h, cv::Point2d p) {
-  const cv::Vec3d q = h * cv::Vec3d(p.x, p.y, 1);
-  return {q[0] / q[2], q[1] / q[2]};
-}
-
 }  // namespace
 
 TEST(OutlineReading, ReadsFarMarkersFromACoarseOutlineInAnyTurn) {
