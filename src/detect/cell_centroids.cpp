@@ -25,6 +25,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "../core/geometry.hpp"
 #include "stages.hpp"
 
 namespace lftag::detail {
@@ -56,21 +57,22 @@ struct Quad {
   }
 };
 
-Quad observed_quad(const UnitRect& r, double grow, const cv::Matx33d& homography, const Camera& camera,
-                   const ImageView& image) {
-  std::vector<cv::Point2d> q;
+// The corners of unit rectangle `r` grown by `grow` units each way, under `homography`
+// (units -> undistorted pixels), appended to `corners`.
+void add_grown(const UnitRect& r, double grow, const cv::Matx33d& homography, std::vector<cv::Point2d>& corners) {
   for (const cv::Point2d u :
        {cv::Point2d(r.x - grow, r.y - grow), cv::Point2d(r.x + r.width + grow, r.y - grow),
-        cv::Point2d(r.x + r.width + grow, r.y + r.height + grow), cv::Point2d(r.x - grow, r.y + r.height + grow)}) {
-    const cv::Vec3d p = homography * cv::Vec3d(u.x, u.y, 1);
-    q.emplace_back(p[0] / p[2], p[1] / p[2]);
-  }
-  distort(camera, q);
+        cv::Point2d(r.x + r.width + grow, r.y + r.height + grow), cv::Point2d(r.x - grow, r.y + r.height + grow)})
+    corners.push_back(apply(homography, u));
+}
+
+// The quadrilateral of four corners as observed (distorted already).
+Quad observed_quad(const cv::Point2d* corners, const ImageView& image) {
   Quad out;
   out.inside = true;
   double top = 1e300, bottom = -1e300;
   for (int i = 0; i < 4; ++i) {
-    const cv::Point2d p = out.corners[i] = q[i];
+    const cv::Point2d p = out.corners[i] = corners[i];
     out.inside &= p.x >= 0 && p.y >= 0 && p.x <= image.width - 1 && p.y <= image.height - 1;
     top = std::min(top, p.y), bottom = std::max(bottom, p.y);
   }
@@ -87,10 +89,19 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
   if (!(smallest_scale(homography, {side / 2, side / 2}) >= kMinPixelsPerUnit)) return {};
   std::vector<cv::Point2d> out;
   if (inks) inks->clear();
+  // Each square's window and the outer edge of its ring, distorted in one call (a call
+  // per quadrilateral was a third of a tracked frame's time under lens distortion).
+  std::vector<cv::Point2d> corners;
+  corners.reserve(8 * std::size_t(family.cell_count()));
   for (int g = 0; g < family.cell_count(); ++g) {
     const UnitRect s = family.square(g, family.is_baseline(g) ? 0 : id.digit(family.data_index(g)));
-    const Quad window = observed_quad(s, grow, homography, camera, image);
-    const Quad paper = observed_quad(s, grow + ring_units, homography, camera, image);
+    add_grown(s, grow, homography, corners);
+    add_grown(s, grow + ring_units, homography, corners);
+  }
+  distort(camera, corners);
+  for (int g = 0; g < family.cell_count(); ++g) {
+    const Quad window = observed_quad(&corners[8 * std::size_t(g)], image);
+    const Quad paper = observed_quad(&corners[8 * std::size_t(g) + 4], image);
     // A window cut by the frame's edge would lose ink on one side.
     if (!window.inside || !paper.inside) return {};
 
