@@ -315,7 +315,8 @@ std::optional<detail::OutlineReading> read_one_outline(const ImageView& work, co
                                                        const Family& f, const DetectorParams& p,
                                                        const detail::Deadline& deadline, DetectionStats& stats,
                                                        std::int64_t& reads, int& reads_left,
-                                                       detail::ReadPlaces& read_places, OutlineVerdict* verdict) {
+                                                       detail::ReadPlaces& read_places, OutlineVerdict* verdict,
+                                                       std::optional<TagId> expected = std::nullopt) {
   if (verdict) verdict->family = f, verdict->outline = outline;
   if (reads_left <= 0) {
     ++stats.outline_reads_skipped;
@@ -330,7 +331,7 @@ std::optional<detail::OutlineReading> read_one_outline(const ImageView& work, co
   --reads_left;
   ++reads;
   std::optional<detail::OutlineReading> reading =
-      detail::read_outline(work, outline, f, p.min_pixels_per_unit, deadline, &read_places);
+      detail::read_outline(work, outline, f, p.min_pixels_per_unit, deadline, &read_places, expected);
   const Stage stage = reading ? detail::outline_stage(*reading, p) : Stage::alignment;
   if (stage == Stage::deadline) ++stats.skipped_by_deadline;
   if (verdict) {
@@ -593,7 +594,7 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
       verdict->expected = true;
     }
     const std::optional<detail::OutlineReading> reading = read_one_outline(
-        work, e.corners, e.family, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict);
+        work, e.corners, e.family, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict, e.id);
     if (!reading) continue;
     if (reading->id != e.id) {
       if (verdict) verdict->stage = Stage::unexpected;

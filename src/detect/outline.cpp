@@ -1153,7 +1153,7 @@ void ReadPlaces::add(int n, const cv::Matx33d& homography, const Family& family,
 
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& coarse,
                                            const Family& family, double min_pixels_per_unit, const Deadline& deadline,
-                                           ReadPlaces* read_places) {
+                                           ReadPlaces* read_places, std::optional<TagId> expected) {
   const int side = family.side();
   // The frame around the coarse outline, with room for the alignment to move and for an
   // outline of the data squares only.
@@ -1554,15 +1554,23 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     return r;
   };
   if (deadline.passed()) return cut(out);
-  const auto reading = read_id(h);
-  if (!reading) return std::nullopt;
   out.read = true;
-  out.id = reading->id;
-  out.margin = reading->margin;
-  out.noise_margin = reading->noise_margin;
-  out.evidence = reading->evidence;
-  out.model_ink = reading->ink;
-  out.smear = reading->smear / out.pixels_per_unit;
+  if (expected) {
+    // The id expected gives the marker to align at once: only the reading under the final
+    // alignment below decides (a model of the pixels is most of a reading's cost).
+    out.id = *expected;
+    out.margin = out.noise_margin = out.model_ink = std::numeric_limits<double>::infinity();
+    out.smear = 0;
+  } else {
+    const auto reading = read_id(h);
+    if (!reading) return std::nullopt;
+    out.id = reading->id;
+    out.margin = reading->margin;
+    out.noise_margin = reading->noise_margin;
+    out.evidence = reading->evidence;
+    out.model_ink = reading->ink;
+    out.smear = reading->smear / out.pixels_per_unit;
+  }
 
   // The final homography: the whole marker of the id read, every square in place, aligned
   // again from there; it must fit as well as the structure did, and the cells read under

@@ -548,11 +548,13 @@ struct ReadPlaces {
 // its correlation and pixels per unit, which fail the checks. Each alignment starts only
 // while `deadline` has not passed; after it the reading returned is marked past_deadline.
 // With `read_places`, an outline aligned where a marker was found already is not read
-// again (the reading returned is marked repeated).
+// again (the reading returned is marked repeated). With `expected` (a tracked marker's
+// id), that id's marker is aligned at once and read only under its final alignment.
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& outline,
                                            const Family& family,
                                            double min_pixels_per_unit = DetectorParams{}.min_pixels_per_unit,
-                                           const Deadline& deadline = {}, ReadPlaces* read_places = nullptr);
+                                           const Deadline& deadline = {}, ReadPlaces* read_places = nullptr,
+                                           std::optional<TagId> expected = std::nullopt);
 
 // The checks an outline reading must pass to be a detection, each scale-free.
 constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it

@@ -199,6 +199,34 @@ TEST(OutlineReading, FindsTheLengthOfAMotionBlur) {
     }
 }
 
+TEST(OutlineReading, AnExpectedIdIsReadUnderItsOwnAlignmentAndNeverImposed) {
+  // A tracked marker's id is known: its marker is aligned at once and read only there.
+  // Blurred by 4.8 units, 3x3 and 4x4 read so are accepted as their own id, as without the
+  // expectation; expecting an id one digit away never reads that id.
+  std::mt19937_64 rng(23);
+  DetectorParams params;
+  for (const int n : {3, 4})
+    for (const double angle : {0.0, 45.0, 90.0, 150.0}) {
+      const Family family(n);
+      const TagId id = random_id(family, rng);
+      const Far far = smeared_marker(n, id, 4.8, angle);
+      const std::array<cv::Point2d, 4> outline = coarse(far.corners, 0, 1.0, rng);
+      const std::string what = std::to_string(n) + "x" + std::to_string(n) + ", " + std::to_string(angle) + " deg";
+      const auto reading =
+          read_outline(ImageView(far.scene.image), outline, family, params.min_pixels_per_unit, {}, nullptr, id);
+      ASSERT_TRUE(reading) << what;
+      EXPECT_TRUE(acceptable(*reading, params)) << what << ": evidence " << reading->evidence;
+      EXPECT_EQ(reading->id, id) << what;
+      EXPECT_NEAR(reading->smear, 4.8, 0.8) << what;
+
+      const int digit = int(rng() % std::uint64_t(family.data_cell_count()));
+      const TagId other = id.with_digit(digit, (id.digit(digit) + 1 + int(rng() % 3)) % 4);
+      const auto refused =
+          read_outline(ImageView(far.scene.image), outline, family, params.min_pixels_per_unit, {}, nullptr, other);
+      EXPECT_FALSE(refused && acceptable(*refused, params) && refused->id == other) << what;
+    }
+}
+
 TEST(OutlineReading, ReadsLargeMarkersOnTheirPixelsReducedToThreePerUnit) {
   // 3x3 and 4x4 at 2 m, turned: 6.6 and 5.3 px per unit, which the pixel model reads on
   // the marker's pixels reduced to 3 px per unit. Sharp, and smeared by 4.8 units: read
