@@ -431,9 +431,9 @@ double digit_noise_margin(const Candidate& c, const CellCentres& design, const D
 struct Bow {
   cv::Matx33d h;
   bool sheet = false;
-  cv::Vec3d normal;      // sheet: the homogeneous image of a unit step along the sheet's normal
-  cv::Mat coefficients;  // 12 x 1 (free: b's x terms, then its y terms) or 9 x 1 (sheet)
-  double misfit = 0;     // squared pixels, over the blobs fitted
+  cv::Vec3d normal;                       // sheet: the homogeneous image of a unit step along the sheet's normal
+  std::array<double, 12> coefficients{};  // free: b's x terms, then its y terms; sheet: the first 9
+  double misfit = 0;                      // squared pixels, over the blobs fitted
 };
 
 // Parameters fitted in all, with the homography's.
@@ -481,17 +481,18 @@ BowColumns bow_columns(const Family& f, const Bow& bow, cv::Point2d u) {
 // The bow under h that puts the squares at `units` (grid order) nearest their blobs.
 Bow fit_bow(const Candidate& c, Bow bow, const std::vector<int>& blob_of_cell, const std::vector<cv::Point2d>& units) {
   const int cells = c.family.cell_count(), terms = bow_coefficients(bow.sheet);
-  cv::Mat columns(2 * cells, terms, CV_64F, 0.0), offsets(2 * cells, 1, CV_64F);
+  // (Eigen's QR: through cv::solve, LAPACK's setup doubled the cost of these small solves.)
+  Eigen::MatrixXd columns(2 * cells, terms);
+  Eigen::VectorXd offsets(2 * cells);
   for (int g = 0; g < cells; ++g) {
     const BowColumns shifts = bow_columns(c.family, bow, units[g]);
     const cv::Point2d off = c.blobs[blob_of_cell[g]].point - apply(bow.h, units[g]);
-    for (int k = 0; k < terms; ++k)
-      columns.at<double>(2 * g, k) = shifts[k][0], columns.at<double>(2 * g + 1, k) = shifts[k][1];
-    offsets.at<double>(2 * g, 0) = off.x, offsets.at<double>(2 * g + 1, 0) = off.y;
+    for (int k = 0; k < terms; ++k) columns(2 * g, k) = shifts[k][0], columns(2 * g + 1, k) = shifts[k][1];
+    offsets(2 * g) = off.x, offsets(2 * g + 1) = off.y;
   }
-  cv::solve(columns, offsets, bow.coefficients, cv::DECOMP_QR);
-  const cv::Mat error = columns * bow.coefficients - offsets;
-  bow.misfit = error.dot(error);
+  const Eigen::VectorXd fitted = columns.colPivHouseholderQr().solve(offsets);
+  for (int k = 0; k < terms; ++k) bow.coefficients[k] = fitted(k);
+  bow.misfit = (columns * fitted - offsets).squaredNorm();
   return bow;
 }
 
@@ -499,7 +500,7 @@ cv::Point2d bowed(const Family& f, const Bow& bow, cv::Point2d u) {
   const BowColumns shifts = bow_columns(f, bow, u);
   cv::Point2d p = apply(bow.h, u);
   for (int k = 0; k < bow_coefficients(bow.sheet); ++k)
-    p += cv::Point2d(shifts[k][0], shifts[k][1]) * bow.coefficients.at<double>(k);
+    p += cv::Point2d(shifts[k][0], shifts[k][1]) * bow.coefficients[k];
   return p;
 }
 
