@@ -1555,6 +1555,14 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   };
   if (deadline.passed()) return cut(out);
   out.read = true;
+  const auto take = [&](const PixelModel::Reading& r) {
+    out.id = r.id;
+    out.margin = r.margin;
+    out.noise_margin = r.noise_margin;
+    out.evidence = r.evidence;
+    out.model_ink = r.ink;
+    out.smear = r.smear / out.pixels_per_unit;
+  };
   if (expected) {
     // The id expected gives the marker to align at once: only the reading under the final
     // alignment below decides (a model of the pixels is most of a reading's cost).
@@ -1564,12 +1572,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   } else {
     const auto reading = read_id(h);
     if (!reading) return std::nullopt;
-    out.id = reading->id;
-    out.margin = reading->margin;
-    out.noise_margin = reading->noise_margin;
-    out.evidence = reading->evidence;
-    out.model_ink = reading->ink;
-    out.smear = reading->smear / out.pixels_per_unit;
+    take(*reading);
   }
 
   // The final homography: the whole marker of the id read, every square in place, aligned
@@ -1615,12 +1618,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       out.smear = std::max(out.smear, again->smear / out.pixels_per_unit);
       return out;
     }
-    out.id = again->id;
-    out.margin = again->margin;
-    out.noise_margin = again->noise_margin;
-    out.evidence = again->evidence;
-    out.model_ink = again->ink;
-    out.smear = again->smear / out.pixels_per_unit;
+    take(*again);
   }
   out.margin = out.noise_margin = out.evidence = out.model_ink = 0;  // the reading never settled
   return out;
