@@ -554,8 +554,9 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
     box = cv::Rect(box.x - grow, box.y - grow, box.width + 2 * grow, box.height + 2 * grow);
     // A marker that stayed sharp is measured where expected from the grey levels alone
     // (tracked.cpp), without the patch's threshold, regions and blobs.
+    const cv::Point2d moved = shake(index);
     std::array<cv::Point2d, 4> shaken = e.corners;
-    for (cv::Point2d& corner : shaken) corner += shake(index);
+    for (cv::Point2d& corner : shaken) corner += moved;
     if (std::optional<detail::TrackedMeasurement> m =
             detail::measure_tracked(work, camera, p, e.family, e.id, shaken, stats)) {
       std::optional<Detection> det =
