@@ -41,7 +41,8 @@ constexpr double kMinPixelsPerUnit = 1.25;
 struct Quad {
   std::array<cv::Point2d, 4> corners;
   int top = 0, bottom = -1;
-  bool inside = false;  // wholly inside the image, and finite
+  bool inside = false;            // wholly inside the image, and finite
+  std::array<double, 4> slope{};  // of edge i (corner i to i + 1): x per row, 0 when level
 
   // The pixels x0..x1 (inclusive) of row y inside the quadrilateral (x1 < x0: none).
   std::pair<int, int> span(int y) const {
@@ -49,7 +50,7 @@ struct Quad {
     for (int i = 0; i < 4; ++i) {
       const cv::Point2d a = corners[i], b = corners[(i + 1) % 4];
       if ((a.y - y) * (b.y - y) > 0 || a.y == b.y) continue;  // the edge does not cross the row
-      const double x = a.x + (b.x - a.x) * (y - a.y) / (b.y - a.y);
+      const double x = a.x + slope[i] * (y - a.y);
       lo = std::min(lo, x), hi = std::max(hi, x);
     }
     if (lo > hi) return {1, 0};
@@ -76,6 +77,10 @@ Quad observed_quad(const cv::Point2d* corners, const ImageView& image) {
     out.inside &= p.x >= 0 && p.y >= 0 && p.x <= image.width - 1 && p.y <= image.height - 1;
     top = std::min(top, p.y), bottom = std::max(bottom, p.y);
   }
+  for (int i = 0; i < 4; ++i) {
+    const cv::Point2d a = corners[i], b = corners[(i + 1) % 4];
+    if (a.y != b.y) out.slope[i] = (b.x - a.x) / (b.y - a.y);
+  }
   if (out.inside) out.top = int(std::ceil(top)), out.bottom = int(std::floor(bottom));
   return out;
 }
@@ -99,6 +104,7 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
     add_grown(s, grow + ring_units, homography, corners);
   }
   distort(camera, corners);
+  std::vector<std::pair<int, int>> spans;  // the window's, row by row from its top
   for (int g = 0; g < family.cell_count(); ++g) {
     const Quad window = observed_quad(&corners[8 * std::size_t(g)], image);
     const Quad paper = observed_quad(&corners[8 * std::size_t(g) + 4], image);
@@ -108,12 +114,15 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
     // The paper level: the median grey of the ring between the two.
     std::array<int, 256> ring{};
     int ring_size = 0;
+    int darkest = 255;
+    spans.clear();
     for (int y = paper.top; y <= paper.bottom; ++y) {
       const auto [a, b] = paper.span(y);
       const auto [wa, wb] = window.span(y);
+      if (y >= window.top && y <= window.bottom) spans.emplace_back(wa, wb);
       const std::uint8_t* row = image.data + y * image.stride;
       const auto count = [&](int from, int to) {
-        for (int x = from; x <= to; ++x) ++ring[row[x]];
+        for (int x = from; x <= to; ++x) ++ring[row[x]], darkest = std::min(darkest, int(row[x]));
         ring_size += std::max(0, to - from + 1);
       };
       if (wa > wb) {  // the window misses the row
@@ -124,12 +133,14 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
       }
     }
     if (ring_size == 0) return {};
-    int white = 0, below = ring[0];
+    int white = darkest, below = ring[darkest];
     while (2 * below <= ring_size) below += ring[++white];
 
+    // (The window lies within its ring's rows unless the lens folds them.)
+    const bool cached = window.top >= paper.top && window.bottom <= paper.bottom;
     double m = 0, mx = 0, my = 0;
     for (int y = window.top; y <= window.bottom; ++y) {
-      const auto [a, b] = window.span(y);
+      const auto [a, b] = cached ? spans[std::size_t(y - window.top)] : window.span(y);
       const std::uint8_t* row = image.data + y * image.stride;
       if (!paper_level.local.empty()) {  // a shadow: each pixel against the paper under it
         double row_m = 0, row_mx = 0;
