@@ -32,8 +32,9 @@ constexpr double kRing = 0.5;  // the paper's ring round each window, units (as 
 // motion blur longer than a window's margin is clipped by it, so each refit moves the
 // squares only part of the way: 2 to 3 units of smear settle in four to six refits
 // (test_tracked). Three refits left a quarter of the field clips' motion-blurred 4x4s
-// (both sets) to the patch's search or an outline reading, at several times the cost. A prediction that takes longer is
-// too far off for the windows; the patch's search finds it.
+// (both sets) to the patch's search or an outline reading, at several times the cost.
+// A prediction that takes longer is too far off for the windows; the patch's search
+// finds it.
 constexpr int kMaxRefits = 6;
 constexpr double kCoarseSettled = 0.2, kSettled = 0.05;
 }  // namespace
