@@ -45,6 +45,13 @@ std::optional<detail::TrackedMeasurement> measure(const test::RenderedMarker& r,
   return measure_tracked(ImageView(image), kCamera, params, r.marker.family, id, outline(r, by), stats);
 }
 
+// Every square's measured centroid within `pixels` of the truth.
+void expect_centroids_within(const detail::TrackedMeasurement& m, const test::RenderedMarker& r, double pixels) {
+  const int n = r.marker.family.n();
+  for (int g = 0; g < n * n; ++g)
+    EXPECT_LT(cv::norm(m.candidate.blobs[g].centroid - r.truth.centroids[g]), pixels) << n << " cell " << g;
+}
+
 // A random direction `length` long.
 cv::Point2d step(double length, std::mt19937_64& rng) {
   const double a = std::uniform_real_distribution<double>(0, 2 * CV_PI)(rng);
@@ -67,8 +74,7 @@ TEST(TrackedMeasurement, FindsTheSquaresFromAPredictionAUnitOff) {
       if (!m) continue;
       ++measured;
       EXPECT_EQ(m->decoding.id, r.marker.id);
-      for (int g = 0; g < n * n; ++g)
-        EXPECT_LT(cv::norm(m->candidate.blobs[g].centroid - r.truth.centroids[g]), 0.15) << n << " cell " << g;
+      expect_centroids_within(*m, r, 0.15);
       EXPECT_EQ(m->edges.sides.size(), 8u);
     }
     EXPECT_EQ(measured, markers) << n;
@@ -150,8 +156,7 @@ TEST(TrackedMeasurement, AMotionBlurredMarkerSettles) {
       const auto m = measure(r, r.marker.id, step(0.9 * unit, rng), r.image);
       if (!m) continue;
       ++measured;
-      for (int g = 0; g < n * n; ++g)
-        EXPECT_LT(cv::norm(m->candidate.blobs[g].centroid - r.truth.centroids[g]), 0.3) << n << " cell " << g;
+      expect_centroids_within(*m, r, 0.3);
     }
     EXPECT_EQ(measured, markers) << n;
   }
