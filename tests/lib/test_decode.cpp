@@ -740,6 +740,35 @@ TEST(Decode, ABent3x3IsReadAsASheetOrNotAtAll) {
   EXPECT_GE(sheets, 10);
 }
 
+TEST(Decode, AStronglyBent6x6SettlesOnItsIdOverSeveralRounds) {
+  // 6x6 markers (0.1 m) on cylinders of 0.15 to 0.19 m radius, bulging or hollow, tilted
+  // 30 to 50 degrees, about 165 px across: the bend moves many squares of the flat
+  // reading, and their wrong positions pull the first bow towards themselves. Each round
+  // of the bowed reading frees more of them, until the id holds; none settles on another.
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int found = 0, wrong = 0;
+  for (int trial = 0; trial < 40; ++trial) {
+    SceneMarker m;
+    m.family = Family(6);
+    m.id = TagId(rng() % 16, rng());
+    m.tag_size = 0.1;
+    m.tvec = {0.05 * u(rng), 0.05 * u(rng), 0.55};
+    m.rvec = rotation_from_angles(180 * u(rng), (u(rng) > 0 ? 1 : -1) * (40 + 10 * u(rng)), 10 * u(rng));
+    const double radius = (u(rng) > -0.4 ? 1 : -1) * (0.17 + 0.02 * u(rng));
+    DetectionStats stats;
+    bool right = false;
+    for (const Detection& d : detect_on_cylinder(m, radius, stats)) {
+      right = right || d.id == m.id;
+      wrong += d.id != m.id;
+    }
+    found += right;
+  }
+  EXPECT_EQ(wrong, 0);
+  // Measured: 35 of 40; with the bowed reading stopped after three rounds, 27.
+  EXPECT_GE(found, 32);
+}
+
 TEST(Decode, AContestedFlatReadingOfABent3x3IsLeftToTheSheet) {
   // Id 668 on a cylinder of 0.163 m (its sides towards the camera), 0.55 m away, tilted:
   // the bend moves two squares towards other positions, and the flat grid reads 4828
