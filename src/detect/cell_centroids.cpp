@@ -114,7 +114,6 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
     // The paper level: the median grey of the ring between the two.
     std::array<int, 256> ring{};
     int ring_size = 0;
-    int darkest = 255;
     spans.clear();
     for (int y = paper.top; y <= paper.bottom; ++y) {
       const auto [a, b] = paper.span(y);
@@ -122,7 +121,7 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
       if (y >= window.top && y <= window.bottom) spans.emplace_back(wa, wb);
       const std::uint8_t* row = image.data + y * image.stride;
       const auto count = [&](int from, int to) {
-        for (int x = from; x <= to; ++x) ++ring[row[x]], darkest = std::min(darkest, int(row[x]));
+        for (int x = from; x <= to; ++x) ++ring[row[x]];
         ring_size += std::max(0, to - from + 1);
       };
       if (wa > wb) {  // the window misses the row
@@ -133,7 +132,7 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
       }
     }
     if (ring_size == 0) return {};
-    int white = darkest, below = ring[darkest];
+    int white = 0, below = ring[0];
     while (2 * below <= ring_size) below += ring[++white];
 
     // (The window lies within its ring's rows unless the lens folds them.)

@@ -572,11 +572,9 @@ double bowed_noise_margin(const Candidate& c, const CellCentres& design, const D
 // worst_cell (units) and returns the bow's misfit; none when the id never settles: it
 // comes back to an id it left (a cycle), or is still moving after kMaxBowedRounds.
 // A strong bend takes several rounds: the flat reading's wrong squares pull the first bow
-// towards themselves, and each round frees more of them (a 6x6 on a 0.16 m cylinder, 45
-// degrees of tilt, reached its printed id in the third round and was refused while three
-// rounds were all a reading had: the fourth confirms it). The bound is on cost only: in
-// the field experiment's bent clips every reading that settles does so within four rounds
-// (tuning set) or five (validation).
+// towards themselves, and each round frees more of them; the round after the printed id
+// is reached confirms it. The bound is on cost only: in the field experiment's bent clips
+// every reading that settles does so within four rounds (tuning set) or five (validation).
 constexpr int kMaxBowedRounds = 8;
 std::optional<double> read_bowed(const Candidate& c, const CellCentres& design, const Camera& camera, Decoding& d) {
   const Family& f = c.family;

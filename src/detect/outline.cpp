@@ -1564,11 +1564,9 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     out.smear = r.smear / out.pixels_per_unit;
   };
   // The marker to align first: the id expected, or the one the cells' sampled grey levels
-  // give under the structure's alignment. Only the pixel model's reading under the final
-  // alignment below decides, and its margins are the reading's: a model of the pixels is
-  // most of a reading's cost, and one under the structure's alignment (less exact than the
-  // whole marker's) cost a third of a shadowed marker's read and only made its margins
-  // smaller.
+  // give under the structure's alignment. Only the pixel model's readings under the whole
+  // marker's alignment below decide: a model of the pixels is most of a reading's cost,
+  // and one under the structure's alignment, less exact, could only make margins smaller.
   out.id = expected ? *expected : read_cells(image, h, family, out.pixels_per_unit);
   out.margin = out.noise_margin = out.model_ink = std::numeric_limits<double>::infinity();
   out.smear = 0;
