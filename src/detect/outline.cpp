@@ -1330,6 +1330,21 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   const std::optional<double> aligned_at = align(*templ, warp);
   if (!aligned_at) return std::nullopt;  // did not converge: not a marker's structure
   double correlation = *aligned_at;
+  // An alignment that collapsed, shrinking the structure to under half its start's scale
+  // (a true marker's moves it by much less, see above) and under the readable resolution
+  // (onto a speck, or to nothing), is refused now, as the resolution check would refuse it
+  // after the smear search, the defocus and the reading: aligning again from a collapse
+  // does not undo it.
+  {
+    cv::Matx33d shrunk;
+    cv::Mat(warp).convertTo(cv::Mat(3, 3, CV_64F, shrunk.val), CV_64F);
+    const double aligned_per_unit = smallest_scale(to_frame * shrunk * to_template, {side / 2.0, side / 2.0});
+    if (!(aligned_per_unit >= min_pixels_per_unit || aligned_per_unit >= start_per_unit / 2)) {
+      OutlineReading out;
+      out.correlation = correlation, out.pixels_per_unit = std::isfinite(aligned_per_unit) ? aligned_per_unit : 0;
+      return out;
+    }
+  }
   // Motion blur smears the structure along one direction, which the template does not: a
   // structure that aligned but correlates too little is tried smeared in several
   // directions and lengths, and aligned again with the one that correlates best.
