@@ -365,8 +365,9 @@ struct PatchLook {
 bool look_at_patch(const ImageView& image, cv::Rect box, const detail::SecondLook& look, const DetectorParams& p,
                    const Camera& camera, detail::RegionLabeller& labeller, PatchLook& out, DetectionStats& stats,
                    int* budget_left, std::vector<detail::Candidate>* area_rejected,
-                   std::vector<detail::Candidate>* skipped) {
+                   std::vector<detail::Candidate>* skipped, cv::Point origin = {}) {
   if (!detail::enlarge_patch(image, box, look, out.patch)) return false;
+  out.patch.frame.origin += origin;
   detail::binarise_patch(out.patch, out.binary);
   labeller.label(out.binary, out.tree);
   detail::find_candidates(out.tree, out.binary, ImageView(out.patch.grey), p, camera, out.candidates, stats,
@@ -427,8 +428,9 @@ BorderVerdict border_verdict(const detail::BorderProposal& proposal) {
 
 // The border proposals of the frame (borders.cpp) that no detection covers, clearest
 // first, each looked at as a second look would (its patch binarised at its own midpoint,
-// its candidates decoded: a reading by the squares poses more precisely than one by the
-// outline), then read from its quadrilateral for the families whose border it may be;
+// with the light taken out where a shadow crosses it, its candidates decoded: a reading by
+// the squares poses more precisely than one by the outline, and costs less), then read
+// from its quadrilateral for the families whose border it may be;
 // one marker to a proposal. Within the frame's budget, outline reads and deadline. (The
 // outlines of the patch's other pieces are left to the second look, which reads them
 // anyway where no marker was found.)
@@ -458,8 +460,19 @@ void read_borders(const std::vector<detail::BorderProposal>& proposals, const Im
     ++stats.borders;
     const cv::Rect box = cv::boundingRect(std::vector<cv::Point2f>(proposal.corners.begin(), proposal.corners.end()));
     ++stats.second_looks;
+    // Where the light under it varies (a shadow's edge across the marker), the patch is
+    // looked at with the light taken out, as the first family it may be reads it: its
+    // squares then separate as in even light, and are decoded, cheaper and more precise
+    // than a reading of its outline.
+    std::optional<detail::EvenLight> even;
+    int even_n = 0;  // the family `even` was taken out for
+    for (const Family& f : p.families)
+      if (!even_n && proposal.families[std::size_t(f.n())])
+        even = detail::even_light(work, proposal.corners, f), even_n = f.n();
     const bool patched =
-        look_at_patch(work, box, look, p, camera, labeller, patch_look, stats, budget_left, nullptr, nullptr);
+        even ? look_at_patch(ImageView(even->pixels), box - even->origin, look, p, camera, labeller, patch_look, stats,
+                             budget_left, nullptr, nullptr, even->origin)
+             : look_at_patch(work, box, look, p, camera, labeller, patch_look, stats, budget_left, nullptr, nullptr);
     if (patched) {
       if (trace) trace->second_looks.push_back(box);
       const std::size_t before = found.size();
@@ -479,14 +492,15 @@ void read_borders(const std::vector<detail::BorderProposal>& proposals, const Im
         verdict->border = true;
       }
       std::optional<detail::OutlineReading> reading;
-      if (const std::optional<detail::EvenLight> even = detail::even_light(work, proposal.corners, f)) {
+      if (const std::optional<detail::EvenLight> even_f =
+              f.n() == even_n ? even : detail::even_light(work, proposal.corners, f)) {
         // Read with the light taken out (a shadow's edge across the marker), then placed back
         // in the frame.
-        const cv::Point2d origin(even->origin);
+        const cv::Point2d origin(even_f->origin);
         std::array<cv::Point2d, 4> outline = proposal.corners;
         for (cv::Point2d& q : outline) q -= origin;
         detail::ReadPlaces none;
-        reading = read_one_outline(ImageView(even->pixels), outline, f, p, deadline, stats, stats.outline_reads,
+        reading = read_one_outline(ImageView(even_f->pixels), outline, f, p, deadline, stats, stats.outline_reads,
                                    reads_left, none, verdict);
         if (verdict) verdict->outline = proposal.corners;
         if (reading) reading->homography = cv::Matx33d(1, 0, origin.x, 0, 1, origin.y, 0, 0, 1) * reading->homography;
