@@ -380,7 +380,8 @@ bool look_at_patch(const ImageView& image, cv::Rect box, const detail::SecondLoo
 // with them). Its candidates in `out.candidates` (within the budget left); false when it
 // is empty.
 bool look_as_searched(const ImageView& image, cv::Rect box, const DetectorParams& p, const Camera& camera,
-                      detail::RegionLabeller& labeller, PatchLook& out, DetectionStats& stats, int* budget_left) {
+                      detail::RegionLabeller& labeller, PatchLook& out, DetectionStats& stats, int* budget_left,
+                      cv::Point origin = {}) {
   const int margin = p.threshold_window / 2;
   const cv::Rect area = cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin, box.height + 2 * margin) &
                         cv::Rect(0, 0, image.width, image.height);
@@ -390,10 +391,17 @@ bool look_as_searched(const ImageView& image, cv::Rect box, const DetectorParams
   detail::threshold_mean(view, p.threshold_window, p.threshold_offset, out.mean, out.binary);
   labeller.label(out.binary, out.tree);
   detail::PatchFrame frame;
-  frame.origin = area.tl();
+  frame.origin = area.tl() + origin;
   detail::find_candidates(out.tree, out.binary, view, p, camera, out.candidates, stats, frame, nullptr, budget_left,
                           nullptr);
   return true;
+}
+
+// The candidates of a patch looked at with the light taken out (`even`): their squares are
+// measured again in the frame (the pose's cell centroids), each pixel against the paper
+// under it, as the search measures a shadowed candidate's (paper_under).
+void measured_under(const detail::EvenLight& even, std::vector<detail::Candidate>& candidates) {
+  for (detail::Candidate& c : candidates) c.paper.local = even.paper, c.paper.origin = even.origin;
 }
 
 // The marker in a second look's patch whose squares its binary image could not separate:
@@ -413,6 +421,26 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
       ++stats.decoded, ++stats.second_look_found, ++stats.outline_found;
       return;  // one marker to a patch
     }
+}
+
+// An outline read from `outline` (read_one_outline), in the frame or, where `even` holds
+// the light taken out there, in its pixels, the reading then placed back in the frame.
+std::optional<detail::OutlineReading> read_one_outline_in(
+    const std::optional<detail::EvenLight>& even, const ImageView& work, const std::array<cv::Point2d, 4>& outline,
+    const Family& f, const DetectorParams& p, const detail::Deadline& deadline, DetectionStats& stats, int& reads_left,
+    detail::ReadPlaces& read_places, OutlineVerdict* verdict, std::optional<TagId> expected = std::nullopt) {
+  if (!even)
+    return read_one_outline(work, outline, f, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict,
+                            expected);
+  const cv::Point2d origin(even->origin);
+  std::array<cv::Point2d, 4> moved = outline;
+  for (cv::Point2d& q : moved) q -= origin;
+  detail::ReadPlaces none;  // (they are the frame's)
+  std::optional<detail::OutlineReading> reading = read_one_outline(
+      ImageView(even->pixels), moved, f, p, deadline, stats, stats.outline_reads, reads_left, none, verdict, expected);
+  if (verdict) verdict->outline = outline;
+  if (reading) reading->homography = cv::Matx33d(1, 0, origin.x, 0, 1, origin.y, 0, 0, 1) * reading->homography;
+  return reading;
 }
 
 // What the trace tells of a border proposal: its outline and evidence (its stage is
@@ -473,6 +501,7 @@ void read_borders(const std::vector<detail::BorderProposal>& proposals, const Im
         even ? look_at_patch(ImageView(even->pixels), box - even->origin, look, p, camera, labeller, patch_look, stats,
                              budget_left, nullptr, nullptr, even->origin)
              : look_at_patch(work, box, look, p, camera, labeller, patch_look, stats, budget_left, nullptr, nullptr);
+    if (patched && even) measured_under(*even, patch_look.candidates);
     if (patched) {
       if (trace) trace->second_looks.push_back(box);
       const std::size_t before = found.size();
@@ -491,23 +520,9 @@ void read_borders(const std::vector<detail::BorderProposal>& proposals, const Im
         verdict = &trace->outline_reads.emplace_back();
         verdict->border = true;
       }
-      std::optional<detail::OutlineReading> reading;
-      if (const std::optional<detail::EvenLight> even_f =
-              f.n() == even_n ? even : detail::even_light(work, proposal.corners, f)) {
-        // Read with the light taken out (a shadow's edge across the marker), then placed back
-        // in the frame.
-        const cv::Point2d origin(even_f->origin);
-        std::array<cv::Point2d, 4> outline = proposal.corners;
-        for (cv::Point2d& q : outline) q -= origin;
-        detail::ReadPlaces none;
-        reading = read_one_outline(ImageView(even_f->pixels), outline, f, p, deadline, stats, stats.outline_reads,
-                                   reads_left, none, verdict);
-        if (verdict) verdict->outline = proposal.corners;
-        if (reading) reading->homography = cv::Matx33d(1, 0, origin.x, 0, 1, origin.y, 0, 0, 1) * reading->homography;
-      } else {
-        reading = read_one_outline(work, proposal.corners, f, p, deadline, stats, stats.outline_reads, reads_left,
-                                   read_places, verdict);
-      }
+      const std::optional<detail::OutlineReading> reading =
+          read_one_outline_in(f.n() == even_n ? even : detail::even_light(work, proposal.corners, f), work,
+                              proposal.corners, f, p, deadline, stats, reads_left, read_places, verdict);
       if (border && verdict && (border->stage == Stage::border || int(verdict->stage) > int(border->stage)))
         border->family = f, border->stage = verdict->stage;
       if (!reading || !add_outline_detection(*reading, f, camera, p, found, read_places, verdict)) continue;
@@ -585,15 +600,21 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
     look.sought.reset().set(e.family.n());
     // Otherwise a marker that stayed sharp is found as the search found it, at a fraction of a
     // second look's cost (no enlarged patch, no local extremes); a blurred or shadowed one
-    // by the second look.
+    // by the second look. Both look with the light taken out where a shadow crosses it.
+    const std::optional<detail::EvenLight> even = detail::even_light(work, e.corners, e.family);
+    const ImageView pixels = even ? ImageView(even->pixels) : work;
+    const cv::Point origin = even ? even->origin : cv::Point();
     bool taken = false;
     for (const bool as_second_look : {false, true}) {
       if (taken || (budget_left && *budget_left <= 0)) break;
       std::vector<Detection> local;
       if (as_second_look
-              ? look_at_patch(work, box, look, p, camera, labeller, patch_look, stats, budget_left, nullptr, nullptr)
-              : look_as_searched(work, box, p, camera, labeller, patch_look, stats, budget_left))
+              ? look_at_patch(pixels, box - origin, look, p, camera, labeller, patch_look, stats, budget_left, nullptr,
+                              nullptr, origin)
+              : look_as_searched(pixels, box - origin, p, camera, labeller, patch_look, stats, budget_left, origin)) {
+        if (even) measured_under(*even, patch_look.candidates);
         decode_candidates(patch_look.candidates, work, camera, p, true, deadline, stats, trace, local);
+      }
       const auto it = std::find_if(local.begin(), local.end(), [&](const Detection& d) { return is_expected(e, d); });
       taken = it != local.end() && !already_found(found, it->center);
       stats.decoded -= std::int64_t(local.size()) - taken;  // the others are not detections
@@ -608,8 +629,8 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
       verdict = &trace->outline_reads.emplace_back();
       verdict->expected = true;
     }
-    const std::optional<detail::OutlineReading> reading = read_one_outline(
-        work, e.corners, e.family, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict, e.id);
+    const std::optional<detail::OutlineReading> reading = read_one_outline_in(
+        even, work, e.corners, e.family, p, deadline, stats, reads_left, read_places, verdict, e.id);
     if (!reading) continue;
     if (reading->id != e.id) {
       if (verdict) verdict->stage = Stage::unexpected;

@@ -116,6 +116,7 @@ std::optional<EvenLight> even_light(const ImageView& image, const std::array<cv:
   cv::max(level, 1.0, level);
   ratio = ratio / level * double(bright);
   ratio.convertTo(out.pixels, CV_8U);
+  out.paper = paper;
   return out;
 }
 

@@ -395,6 +395,7 @@ bool light_varies(cv::Mat1b& paper, const Even& even) {
 struct EvenLight {
   cv::Mat1b pixels;
   cv::Point origin;  // the frame pixel of pixels(0, 0)
+  cv::Mat1b paper;   // the paper's level under each pixel (frame grey levels), from origin
 };
 // None where the light is even along the marker's white ring (its dimmest tenth at
 // kMinPaperSpread of its brightest or more, as paper_under decides for candidates) or the
