@@ -497,10 +497,9 @@ void read_borders(const std::vector<detail::BorderProposal>& proposals, const Im
     for (const Family& f : p.families)
       if (!even_n && proposal.families[std::size_t(f.n())])
         even = detail::even_light(work, proposal.corners, f), even_n = f.n();
-    const bool patched =
-        even ? look_at_patch(ImageView(even->pixels), box - even->origin, look, p, camera, labeller, patch_look, stats,
-                             budget_left, nullptr, nullptr, even->origin)
-             : look_at_patch(work, box, look, p, camera, labeller, patch_look, stats, budget_left, nullptr, nullptr);
+    const cv::Point origin = even ? even->origin : cv::Point();
+    const bool patched = look_at_patch(even ? ImageView(even->pixels) : work, box - origin, look, p, camera, labeller,
+                                       patch_look, stats, budget_left, nullptr, nullptr, origin);
     if (patched && even) measured_under(*even, patch_look.candidates);
     if (patched) {
       if (trace) trace->second_looks.push_back(box);
