@@ -599,15 +599,19 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
     look.sought.reset().set(e.family.n());
     // Otherwise a marker that stayed sharp is found as the search found it, at a fraction of a
     // second look's cost (no enlarged patch, no local extremes); a blurred or shadowed one
-    // by the second look. Both look with the light taken out where a shadow crosses it.
-    const std::optional<detail::EvenLight> even = detail::even_light(work, e.corners, e.family);
-    const ImageView pixels = even ? ImageView(even->pixels) : work;
-    const cv::Point origin = even ? even->origin : cv::Point();
+    // by the second look. Where a shadow crosses the expected outline, the light is taken
+    // out once the plain look has failed (the closing is spared the markers it finds), and
+    // the search's look and the second look are made in those pixels.
+    std::optional<detail::EvenLight> even;
     bool taken = false;
-    for (const bool as_second_look : {false, true}) {
+    enum class Look { searched, searched_in_even_light, second };
+    for (const Look kind : {Look::searched, Look::searched_in_even_light, Look::second}) {
       if (taken || (budget_left && *budget_left <= 0)) break;
+      if (kind == Look::searched_in_even_light && !(even = detail::even_light(work, e.corners, e.family))) continue;
+      const ImageView pixels = even ? ImageView(even->pixels) : work;
+      const cv::Point origin = even ? even->origin : cv::Point();
       std::vector<Detection> local;
-      if (as_second_look
+      if (kind == Look::second
               ? look_at_patch(pixels, box - origin, look, p, camera, labeller, patch_look, stats, budget_left, nullptr,
                               nullptr, origin)
               : look_as_searched(pixels, box - origin, p, camera, labeller, patch_look, stats, budget_left, origin)) {
