@@ -598,15 +598,16 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
     detail::SecondLook look;
     look.sought.reset().set(e.family.n());
     // Otherwise a marker that stayed sharp is found as the search found it, at a fraction of a
-    // second look's cost (no enlarged patch, no local extremes); a blurred or shadowed one
-    // by the second look. Where a shadow crosses the expected outline, the light is taken
-    // out once the plain look has failed (the closing is spared the markers it finds), and
-    // the search's look and the second look are made in those pixels.
-    std::optional<detail::EvenLight> even;
+    // second look's cost (no enlarged patch, no local extremes), and where a shadow crosses
+    // the expected outline so again with the light taken out (the closing is spared the
+    // markers the plain look finds); a blurred one by the second look. (The second look and
+    // the outline read stay in the frame's pixels: a motion blur's smear also makes the
+    // paper's level look uneven, and the evened pixels lose the smeared squares.)
     bool taken = false;
     enum class Look { searched, searched_in_even_light, second };
     for (const Look kind : {Look::searched, Look::searched_in_even_light, Look::second}) {
       if (taken || (budget_left && *budget_left <= 0)) break;
+      std::optional<detail::EvenLight> even;
       if (kind == Look::searched_in_even_light && !(even = detail::even_light(work, e.corners, e.family))) continue;
       const ImageView pixels = even ? ImageView(even->pixels) : work;
       const cv::Point origin = even ? even->origin : cv::Point();
@@ -632,8 +633,8 @@ void read_expected(const std::vector<ExpectedMarker>& expected, const ImageView&
       verdict = &trace->outline_reads.emplace_back();
       verdict->expected = true;
     }
-    const std::optional<detail::OutlineReading> reading = read_one_outline_in(
-        even, work, e.corners, e.family, p, deadline, stats, reads_left, read_places, verdict, e.id);
+    const std::optional<detail::OutlineReading> reading = read_one_outline(
+        work, e.corners, e.family, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict, e.id);
     if (!reading) continue;
     if (reading->id != e.id) {
       if (verdict) verdict->stage = Stage::unexpected;
