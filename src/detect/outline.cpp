@@ -1327,24 +1327,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     if (c) cv::Mat(w).copyTo(warp_to_crop);
     return c;
   };
-  const std::optional<double> aligned_at = align(*templ, warp);
-  if (!aligned_at) return std::nullopt;  // did not converge: not a marker's structure
-  double correlation = *aligned_at;
-  // An alignment that collapsed, shrinking the structure to under half its start's scale
-  // (a true marker's moves it by much less, see above) and under the readable resolution
-  // (onto a speck, or to nothing), is refused now, as the resolution check would refuse it
-  // after the smear search, the defocus and the reading: aligning again from a collapse
-  // does not undo it.
-  {
-    cv::Matx33d shrunk;
-    cv::Mat(warp).convertTo(cv::Mat(3, 3, CV_64F, shrunk.val), CV_64F);
-    const double aligned_per_unit = smallest_scale(to_frame * shrunk * to_template, {side / 2.0, side / 2.0});
-    if (!(aligned_per_unit >= min_pixels_per_unit || aligned_per_unit >= start_per_unit / 2)) {
-      OutlineReading out;
-      out.correlation = correlation, out.pixels_per_unit = std::isfinite(aligned_per_unit) ? aligned_per_unit : 0;
-      return out;
-    }
-  }
+  double correlation = 0;  // of the alignment that stands
   // Motion blur smears the structure along one direction, which the template does not: a
   // structure that aligned but correlates too little is tried smeared in several
   // directions and lengths, and aligned again with the one that correlates best.
@@ -1420,35 +1403,39 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     uneven = best_uneven;
     return true;
   };
-  if (correlation < kMinCorrelation && correlation >= kMinSmearedCorrelation) {
-    // Directions every 22.5 degrees and lengths every 1.5 units, then half steps around the
-    // best (the image's own least-gradient direction snaps to the marker's axes when the
-    // blur runs diagonally, so it is searched).
-    const double crop_per_unit = per_unit * zx;
-    double best = sparse.correlation(crop, warp);
+  // The motion blur under which the structure correlates best with the crop under
+  // `warp_to_crop`, and that correlation; none (zero) when none beats `to_beat`. Directions
+  // every 22.5 degrees and lengths every 1.5 units, then half steps around the best (the
+  // image's own least-gradient direction snaps to the marker's axes when the blur runs
+  // diagonally, so it is searched).
+  const double crop_per_unit = per_unit * zx;
+  const auto seek_smear = [&](const cv::Mat& warp_to_crop, double to_beat) {
+    double best = to_beat;
     cv::Point2d best_along;
     const auto try_smear = [&](double angle, double units) {
       const cv::Point2d along = cv::Point2d(std::cos(angle), std::sin(angle)) * units * crop_per_unit;
-      const cv::Point2d in_template = template_smear(warp, along);
+      const cv::Point2d in_template = template_smear(warp_to_crop, along);
       if (in_template == cv::Point2d()) return;
-      if (const double c = SparseTemplate(*templ, 3, in_template).correlation(crop, warp); c > best)
+      if (const double c = SparseTemplate(*templ, 3, in_template).correlation(crop, warp_to_crop); c > best)
         best = c, best_along = along;
     };
     // The grid's lengths of one direction share their samples (SparseTemplate::smeared):
     // a smear's image in the template is linear in its length.
     for (int a = 0; a < 8; ++a) {
       const cv::Point2d unit_along = cv::Point2d(std::cos(a * CV_PI / 8), std::sin(a * CV_PI / 8)) * crop_per_unit;
-      const cv::Point2d per_unit_in_template = template_smear(warp, unit_along);
+      const cv::Point2d per_unit_in_template = template_smear(warp_to_crop, unit_along);
       const double stretch = cv::norm(per_unit_in_template);
       if (stretch == 0) continue;
       std::vector<double> units, lengths;  // units of the marker, template pixels
       for (double u = 1.5; u <= kLongestSmearSought; u += 1.5)
-        if (template_smear(warp, unit_along * u) != cv::Point2d()) units.push_back(u), lengths.push_back(u * stretch);
+        if (template_smear(warp_to_crop, unit_along * u) != cv::Point2d())
+          units.push_back(u), lengths.push_back(u * stretch);
       if (lengths.empty()) continue;
       const std::vector<SparseTemplate> grid =
           SparseTemplate::smeared(*templ, 3, per_unit_in_template / stretch, lengths);
       for (std::size_t k = 0; k < grid.size(); ++k)
-        if (const double c = grid[k].correlation(crop, warp); c > best) best = c, best_along = unit_along * units[k];
+        if (const double c = grid[k].correlation(crop, warp_to_crop); c > best)
+          best = c, best_along = unit_along * units[k];
     }
     if (best_along != cv::Point2d()) {
       const double angle = std::atan2(best_along.y, best_along.x), units = cv::norm(best_along) / crop_per_unit;
@@ -1456,15 +1443,60 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
         for (const double du : {-0.75, 0.0, 0.75})
           if (da != 0 || du != 0) try_smear(angle + da, units + du);
     }
-    if (!try_defocus(best) && best_along != cv::Point2d() && !deadline.passed()) {
-      cv::Mat again = warp.clone();
-      // (When it fails, the unsmeared alignment stands.)
-      if (const std::optional<double> c = align(smeared(*templ, template_kernel(warp, best_along)), again);
-          c && *c > correlation) {
-        correlation = *c, warp = again, smear_crop = best_along;
-        smear = {best_along.x / zx, best_along.y / zy};
-      }
+    return std::make_pair(best, best_along);
+  };
+  // The structure smeared `along` (crop pixels), aligned from `warp_to_crop`: it stands
+  // when it correlates better than `to_beat`.
+  const auto align_smeared = [&](const cv::Mat& warp_to_crop, cv::Point2d along, double to_beat) {
+    cv::Mat again = warp_to_crop.clone();
+    const cv::Mat1f smeared_structure = smeared(*templ, template_kernel(warp_to_crop, along));
+    const std::optional<double> c = align(smeared_structure, again);
+    if (!c || *c <= to_beat) return false;
+    correlation = *c, warp = again, smear_crop = along;
+    smear = {along.x / zx, along.y / zy};
+    // A smear mixes the cores with the white round them as a defocus does: the contrast
+    // check asks for the ink the unsmeared template would show.
+    contrast_scale *= structure_contrast(*templ) / structure_contrast(smeared_structure);
+    return true;
+  };
+  // Motion blur can also keep the sharp structure from aligning at all, or leave it
+  // aligned under kMinSmearedCorrelation, where no smear is sought after the alignment: the
+  // smears are then sought where the start puts the structure, and the best one is aligned
+  // when it correlates there as well as an aligned structure must for a smear to be sought.
+  std::optional<double> aligned_at = align(*templ, warp);
+  if (aligned_at) correlation = *aligned_at;
+  if ((!aligned_at || correlation < kMinSmearedCorrelation) && !deadline.passed()) {
+    const cv::Mat at_start = warp_of(start);
+    const auto [smeared_start, along] = seek_smear(at_start, start_correlation);
+    if (along != cv::Point2d() && smeared_start >= kMinSmearedCorrelation &&
+        align_smeared(at_start, along, aligned_at ? correlation : -1)) {
+      aligned_at = correlation;
+      // A defocus seen obliquely is longer across the tilt, much as a smear: where one
+      // aligns better, it is the blur found.
+      if (try_defocus(correlation) && defocus > 0) smear = smear_crop = cv::Point2d();
     }
+  }
+  if (!aligned_at) return std::nullopt;  // did not converge: not a marker's structure
+  // An alignment that collapsed, shrinking the structure to under half its start's scale
+  // (a true marker's moves it by much less, see above) and under the readable resolution
+  // (onto a speck, or to nothing), is refused now, as the resolution check would refuse it
+  // after the smear search, the defocus and the reading: aligning again from a collapse
+  // does not undo it.
+  {
+    cv::Matx33d shrunk;
+    cv::Mat(warp).convertTo(cv::Mat(3, 3, CV_64F, shrunk.val), CV_64F);
+    const double aligned_per_unit = smallest_scale(to_frame * shrunk * to_template, {side / 2.0, side / 2.0});
+    if (!(aligned_per_unit >= min_pixels_per_unit || aligned_per_unit >= start_per_unit / 2)) {
+      OutlineReading out;
+      out.correlation = correlation, out.pixels_per_unit = std::isfinite(aligned_per_unit) ? aligned_per_unit : 0;
+      return out;
+    }
+  }
+  if (correlation < kMinCorrelation && correlation >= kMinSmearedCorrelation && smear_crop == cv::Point2d()) {
+    const auto [best, best_along] = seek_smear(warp, sparse.correlation(crop, warp));
+    // (When the smeared alignment fails, the unsmeared one stands.)
+    if (!try_defocus(best) && best_along != cv::Point2d() && !deadline.passed())
+      align_smeared(warp, best_along, correlation);
   }
   cv::Matx33d w, aligned;  // units (some turn) -> frame pixels
   // Its black and white under the alignment: the cores, and the middle of the white ring.

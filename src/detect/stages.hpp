@@ -565,6 +565,8 @@ constexpr double kMinResolvedStartCorrelation = 0.66, kResolvedPixelsPerUnit = 2
 constexpr double kMinSharpStartCorrelation = 0.55, kSharpPixelsPerUnit = 1.5;
 // Aligned, below which no motion blur or defocus is sought. A 31 px 4x4 at 60 degrees of
 // tilt, defocused by 1.45 px, aligned at 0.58 to 0.60 before its defocus took it to 0.76.
+// Where the sharp structure aligned under it, or not at all, the best smear at the start
+// must reach it to be aligned.
 constexpr double kMinSmearedCorrelation = 0.55;
 constexpr double kMinCorrelation = 0.75, kMinMarkerCorrelation = 0.75, kMinContrast = 16, kMinMargin = 0.03;
 // The turn: the two corners taken as the baselines must look more like baselines than

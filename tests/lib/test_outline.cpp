@@ -9,7 +9,10 @@
 
 #include "../../src/core/geometry.hpp"
 #include "binary.hpp"
+#include "lftag/detector.hpp"
+#include "lftag/image_file.hpp"
 #include "lftag/render.hpp"
+#include "lftag/trace.hpp"
 #include "scenes.hpp"
 #include "stages.hpp"
 
@@ -349,8 +352,9 @@ TEST(OutlineReading, ReadsDefocusedMarkersSeenObliquely) {
   // tilt. Against the sharper template many align under 0.6, where no blur was sought
   // before (6 of the 60 read so); the defocus is sought from 0.55 (20 read), and as the
   // frame blurs them: in the template, twice as long across the tilt's axis as along it
-  // (50 read; 20 with a round blur). Those read are read right, every one under a
-  // defocus found.
+  // (50 read; 20 with a round blur). Those the sharp structure aligns under 0.55 align
+  // from the start's best smear, and their defocus is found from there (60 read). Those
+  // read are read right, every one under a defocus found.
   std::mt19937_64 rng(23);
   DetectorParams params;
   int read = 0;
@@ -359,9 +363,9 @@ TEST(OutlineReading, ReadsDefocusedMarkersSeenObliquely) {
     if (!reading || !acceptable(*reading, params)) continue;
     ++read;
     EXPECT_EQ(reading->id, id) << "trial " << trial;
-    EXPECT_GT(reading->defocus, 0) << "trial " << trial;
+    EXPECT_GT(reading->defocus, 0) << "trial " << trial << ", smear " << reading->smear;
   }
-  EXPECT_GE(read, 40);
+  EXPECT_GE(read, 55);
 }
 
 TEST(OutlineReading, MarkersDefocusedBeyondTheBlursSoughtFailTheContrastCheck) {
@@ -923,5 +927,29 @@ TEST(OutlineReading, EachCheckRefusesAReadingJustOutsideItsBound) {
     EXPECT_EQ(outline_stage(r, params), Stage::detected) << b.name << " " << b.inside;
     r.*b.field = b.outside;
     EXPECT_EQ(outline_stage(r, params), b.refused_at) << b.name << " " << b.outside;
+  }
+}
+
+// Two 4x4 markers cut from the field experiment's motion clips (tuning set): 59 px at 30
+// degrees of tilt smeared by 13.7 px, and 36 px at 27 degrees smeared by 10.1 px, with
+// rolling shutter, defocus, noise and JPEG. The sharp structure aligned first does not
+// converge or lands under kMinSmearedCorrelation, so no smear was sought after it; sought
+// at the start, the smear aligns and the marker reads. Its contrast is then checked as
+// the unsmeared template would show it (the smear's grey cores once failed that check).
+TEST(OutlineReading, LongMotionBlursAreSoughtAtTheStartWhereTheSharpStructureDoesNotAlign) {
+  for (const auto& [file, id] : {std::pair<const char*, std::uint64_t>{"motion-4x4-id94099419.png", 94099419},
+                                 {"motion-4x4-id234906164.png", 234906164}}) {
+    const cv::Mat1b frame = read_grey_image(std::string(LFTAG_TEST_DATA) + "/" + file);
+    ASSERT_FALSE(frame.empty()) << file;
+    DetectorParams p;
+    p.families = {Family(4)};
+    p.camera = Camera::pinhole(1280, 1280, frame.cols / 2.0, frame.rows / 2.0);
+    DetectionTrace trace;
+    const std::vector<Detection> found = Detector(p).detect(ImageView(frame), nullptr, &trace);
+    ASSERT_EQ(found.size(), 1u) << file;
+    EXPECT_EQ(found[0].id, TagId(id)) << file;
+    bool smeared = false;
+    for (const OutlineVerdict& v : trace.outline_reads) smeared |= v.stage == Stage::detected && v.smear >= 4;
+    EXPECT_TRUE(smeared) << file << ": read from an outline, a smear of 4 units or more found";
   }
 }
