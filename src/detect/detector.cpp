@@ -425,19 +425,21 @@ void read_outlines(const detail::BinaryImage& binary, const detail::PatchFrame& 
 
 // An outline read from `outline` (read_one_outline), in the frame or, where `even` holds
 // the light taken out there, in its pixels, the reading then placed back in the frame.
-std::optional<detail::OutlineReading> read_one_outline_in(
-    const std::optional<detail::EvenLight>& even, const ImageView& work, const std::array<cv::Point2d, 4>& outline,
-    const Family& f, const DetectorParams& p, const detail::Deadline& deadline, DetectionStats& stats, int& reads_left,
-    detail::ReadPlaces& read_places, OutlineVerdict* verdict, std::optional<TagId> expected = std::nullopt) {
+std::optional<detail::OutlineReading> read_one_outline_in(const std::optional<detail::EvenLight>& even,
+                                                          const ImageView& work,
+                                                          const std::array<cv::Point2d, 4>& outline, const Family& f,
+                                                          const DetectorParams& p, const detail::Deadline& deadline,
+                                                          DetectionStats& stats, int& reads_left,
+                                                          detail::ReadPlaces& read_places, OutlineVerdict* verdict) {
   if (!even)
-    return read_one_outline(work, outline, f, p, deadline, stats, stats.outline_reads, reads_left, read_places, verdict,
-                            expected);
+    return read_one_outline(work, outline, f, p, deadline, stats, stats.outline_reads, reads_left, read_places,
+                            verdict);
   const cv::Point2d origin(even->origin);
   std::array<cv::Point2d, 4> moved = outline;
   for (cv::Point2d& q : moved) q -= origin;
   detail::ReadPlaces none;  // (they are the frame's)
   std::optional<detail::OutlineReading> reading = read_one_outline(
-      ImageView(even->pixels), moved, f, p, deadline, stats, stats.outline_reads, reads_left, none, verdict, expected);
+      ImageView(even->pixels), moved, f, p, deadline, stats, stats.outline_reads, reads_left, none, verdict);
   if (verdict) verdict->outline = outline;
   if (reading) reading->homography = cv::Matx33d(1, 0, origin.x, 0, 1, origin.y, 0, 0, 1) * reading->homography;
   return reading;
