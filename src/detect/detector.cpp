@@ -334,6 +334,17 @@ std::optional<detail::OutlineReading> read_one_outline(const ImageView& work, co
       detail::read_outline(work, outline, f, p.min_pixels_per_unit, deadline, &read_places, expected);
   const Stage stage = reading ? detail::outline_stage(*reading, p) : Stage::alignment;
   if (stage == Stage::deadline) ++stats.skipped_by_deadline;
+  // A place read and plainly refused is not read again in this frame: another outline of
+  // the same marker (a second look's, after its border's) aligns there too, to a fraction
+  // of a unit (ReadPlaces::seen), and a marker whose cells show under half the evidence a
+  // reading needs does not reach it from another start. Nearer the bound, or with a motion
+  // blur (which another start may find otherwise), another reading may pass: in the field
+  // experiment's tuning set, readings refused at 0.26 to 0.39 were read again at 0.40 to
+  // 0.46, and two smeared ones at 0.07 and 0.24 at 0.64. A tracked marker's reading, which
+  // only its own id passes, leaves the place to the others.
+  if (reading && reading->read && !expected && reading->smear == 0 && stage == Stage::margin &&
+      reading->evidence < detail::kEvidenceNotReadAgain)
+    read_places.add(f.n(), reading->homography, f, reading->pixels_per_unit);
   if (verdict) {
     verdict->stage = stage;
     if (reading) {

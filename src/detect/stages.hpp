@@ -583,6 +583,10 @@ constexpr double kMinBaselineGap = 0.25;
 // and detector tests' renders at the resolution and blur limits, whose right readings had
 // 0.37 (one) and 0.41 or more; the validation set's wrong ones had 0.16 at most.
 constexpr double kMinEvidence = 0.4;
+// An unsmeared reading refused with under this evidence marks its place read for the rest
+// of the frame (read_one_outline in detector.cpp): half the bound, under the least (0.26)
+// of the readings that the field experiment's tuning set read again and accepted.
+constexpr double kEvidenceNotReadAgain = kMinEvidence / 2;
 // The ink (paper minus ink level) that the pixel model fits to the whole marker must be
 // more than this share of the contrast measured between its white ring and its squares'
 // cores (OutlineReading::model_ink): squares at the positions read that explain the grey
