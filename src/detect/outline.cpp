@@ -1465,7 +1465,8 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
   // when it correlates there as well as an aligned structure must for a smear to be sought.
   std::optional<double> aligned_at = align(*templ, warp);
   if (aligned_at) correlation = *aligned_at;
-  if ((!aligned_at || correlation < kMinSmearedCorrelation) && !deadline.passed()) {
+  if ((!aligned_at || correlation < kMinSmearedCorrelation) && start_per_unit >= kMinSmearedStartPixelsPerUnit &&
+      !deadline.passed()) {
     const cv::Mat at_start = warp_of(start);
     const auto [smeared_start, along] = seek_smear(at_start, start_correlation);
     if (along != cv::Point2d() && smeared_start >= kMinSmearedCorrelation &&
