@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 #include <Eigen/Dense>
 #include <opencv2/calib3d.hpp>
@@ -1107,6 +1108,43 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
   }
   best.verdict = Verdict::accepted;
   return best;
+}
+
+std::optional<Decoding> decode_expected(const Candidate& c, TagId id, const ImageView& image, const Camera& camera,
+                                        const DetectorParams& params, DetectionStats& stats) {
+  const Family& f = c.family;
+  if (f.n() < 3 || int(c.blobs.size()) != f.cell_count()) return std::nullopt;
+  const auto start = std::chrono::steady_clock::now();
+  const CellCentres& design = design_centres(f);
+  const int side = f.side();
+  Decoding d;
+  d.id = id;
+  d.blob_of_cell.resize(std::size_t(f.cell_count()));
+  std::iota(d.blob_of_cell.begin(), d.blob_of_cell.end(), 0);
+  const std::optional<cv::Matx33d> h = refit(c, design, d);
+  const auto done = [&](std::optional<Decoding> out) {
+    stats.decode_ms += elapsed_ms(start);
+    return out;
+  };
+  if (!h || !maps_marker(f, *h)) return done(std::nullopt);
+  d.homography = *h;
+  CellCentres projected;
+  project_centres(design, d.homography, projected);
+  const double residual = read_digits(c, design, projected, d, true);
+  if (d.id != id || smallest_scale(d.homography, {side / 2.0, side / 2.0}) < params.min_pixels_per_unit ||
+      d.worst_cell > params.max_cell_residual)
+    return done(std::nullopt);
+  d.ink_spread = square_ink_spread(c, d);
+  if (!(d.ink_spread <= params.max_ink_spread)) return done(std::nullopt);
+  d.edge_score = edge_gradient(image, camera, d.homography, 2, side - 2);
+  if (!(d.edge_score > 0)) return done(std::nullopt);
+  d.error = residual / std::sqrt(std::max(1.0, c.white_area)) / d.edge_score;
+  if (d.error > params.decode_threshold(f)) return done(std::nullopt);
+  d.noise_margin = digit_noise_margin(c, design, d);
+  if (f.n() >= 4) d.noise_margin = std::min(d.noise_margin, bowed_noise_margin(c, design, d, camera, false));
+  if (d.noise_margin < params.min_noise_margin) return done(std::nullopt);
+  d.verdict = Verdict::accepted;
+  return done(d);
 }
 
 }  // namespace lftag::detail

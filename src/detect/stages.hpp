@@ -667,6 +667,14 @@ std::optional<Decoding> decode(const Candidate& c, const KeyPoints& k, const Ima
                                const DetectorParams& params, DetectionStats& stats,
                                std::vector<std::vector<cv::Point2d>>* hypotheses);
 
+// The reading of a candidate whose blob g is cell g of marker `id` (a tracked marker
+// measured where its id puts its squares, tracked.cpp): that one reading, held to every
+// bound decode() holds its best reading to on its own (resolution, cell residual, even
+// ink, tau3, the noise margins), and none when its digits read another id or it fails one.
+// The other key-point hypotheses are not tried: the squares' order is known.
+std::optional<Decoding> decode_expected(const Candidate& c, TagId id, const ImageView& image, const Camera& camera,
+                                        const DetectorParams& params, DetectionStats& stats);
+
 // Mean 3x3 Sobel magnitude along the square x, y in {a, b} (units) under homography h.
 double edge_gradient(const ImageView& image, const Camera& camera, const cv::Matx33d& h, double a, double b);
 

@@ -3,9 +3,13 @@
 // binarising, labelling or measuring blobs: its id is known, so each square's window is
 // known too once the outline is. Its squares' ink centroids are taken from the grey
 // levels under the predicted outline (cell_centroids.cpp), the outline is refitted to
-// them until it settles, and the centroids are then decoded like any candidate's blobs
-// (decode.cpp: the cell residual, ink spread, decoding error and noise margin bounds all
-// apply, and the id read must be the one expected).
+// them until it settles, and the centroids are then decoded as the expected id's reading
+// (decode_expected: the resolution, cell residual, ink spread, decoding error and noise
+// margin bounds of every candidate's reading apply, and each digit must read as expected).
+// A search's candidate is decoded under 16 hypotheses of which squares are its key
+// points; here the windows say which square each centroid is, and that one reading is
+// judged. A different marker under the windows would have to place every square within
+// the noise margin of the expected id's positions to pass.
 //
 // A window centred where the track puts a square finds some centroid there whatever the
 // window holds (on bare paper, the window's centre: a perfect grid), so it is the
@@ -93,7 +97,10 @@ std::optional<TrackedMeasurement> measure_tracked(const ImageView& image, const 
   const std::array<int, 4> keypoint_cells = family.keypoint_cells();
   for (int i = 0; i < 4; ++i) out.keypoints.blob[i] = keypoint_cells[i];
 
-  std::optional<Decoding> d = decode(c, out.keypoints, image, camera, params, stats, nullptr);
+  // Its one reading first (the squares' order is known); the key points' 16 hypotheses
+  // only where that fails, for the bowed grid a bent sheet is read again on.
+  std::optional<Decoding> d = decode_expected(c, id, image, camera, params, stats);
+  if (!d) d = decode(c, out.keypoints, image, camera, params, stats, nullptr);
   if (!d || d->verdict != Verdict::accepted || !(d->ink_spread <= params.max_ink_spread) || d->id != id)
     return std::nullopt;
   out.decoding = std::move(*d);

@@ -6,6 +6,7 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <opencv2/calib3d.hpp>
@@ -396,6 +397,86 @@ TEST(Decode, AnotherIdWithinTheMarginRejectsTheReading) {
   EXPECT_TRUE(run(*p, p->keypoints, params));
   params.min_decode_margin = hi * 1.001;
   EXPECT_FALSE(run(*p, p->keypoints, params));
+}
+
+// The candidate's blobs put in cell order, as a tracked marker's measurement gives them.
+Candidate in_cell_order(const Prepared& p) {
+  Candidate c = p.candidate;
+  c.blobs.clear();
+  for (const int j : p.blob_of_cell) c.blobs.push_back(p.candidate.blobs[std::size_t(j)]);
+  return c;
+}
+
+TEST(Decode, AnExpectedIdIsJudgedByItsOneReadingAsTheSearchJudgesItsBest) {
+  // With the squares in cell order the one reading is the expected id's: the same
+  // homography, error and noise margin as decode()'s best reading of the same blobs.
+  for (const auto& [f, id, tilted] :
+       {std::tuple{Family(3), TagId(6789), false}, std::tuple{Family(4), TagId(1234567), false},
+        std::tuple{Family(4), TagId(1234567), true}, std::tuple{Family(6), TagId(987654321), true}}) {
+    const auto p = tilted ? prepare_scene(f, id, 0.3, 0.6, 0.2, 160, false) : prepare_raster(f, id, 8);
+    ASSERT_TRUE(p) << f.name();
+    const std::string what = f.name() + (tilted ? " tilted" : " face on");
+    DetectionStats stats;
+    const auto full = run(*p, p->keypoints);
+    ASSERT_TRUE(full) << what;
+    const Candidate c = in_cell_order(*p);
+    const auto one = detail::decode_expected(c, id, ImageView(p->image), p->camera, DetectorParams{}, stats);
+    ASSERT_TRUE(one) << what;
+    EXPECT_EQ(one->verdict, detail::Verdict::accepted) << what;
+    EXPECT_EQ(one->id, id) << what;
+    EXPECT_NEAR(one->error, full->error, 1e-9 * full->error + 1e-15) << what;
+    EXPECT_NEAR(one->noise_margin, full->noise_margin, 1e-6 * full->noise_margin) << what;
+    EXPECT_NEAR(one->worst_cell, full->worst_cell, 1e-9) << what;
+    EXPECT_NEAR(one->ink_spread, full->ink_spread, 1e-9) << what;
+    for (int i = 0; i < 9; ++i)
+      EXPECT_NEAR(one->homography.val[i] / one->homography.val[8], full->homography.val[i] / full->homography.val[8],
+                  1e-9 * (1 + std::abs(full->homography.val[i] / full->homography.val[8])))
+          << what;
+    // Another id expected, one digit away: its digits read otherwise, no reading.
+    const TagId other = id.with_digit(1, (id.digit(1) + 1) % 4);
+    EXPECT_FALSE(detail::decode_expected(c, other, ImageView(p->image), p->camera, DetectorParams{}, stats)) << what;
+    // The squares out of order are no reading of it either.
+    Candidate swapped = c;
+    std::swap(swapped.blobs[1], swapped.blobs[std::size_t(f.cell_count() - 2)]);
+    EXPECT_FALSE(detail::decode_expected(swapped, id, ImageView(p->image), p->camera, DetectorParams{}, stats)) << what;
+    // Nor are too few squares.
+    Candidate fewer = c;
+    fewer.blobs.pop_back();
+    EXPECT_FALSE(detail::decode_expected(fewer, id, ImageView(p->image), p->camera, DetectorParams{}, stats)) << what;
+  }
+}
+
+TEST(Decode, AnExpectedIdIsHeldToTheNoiseMargin) {
+  // As in the noise margin's test: 3x3 id 6789 at 8 px/u, every blob scattered by +-0.1 px
+  // and the centre cell's blob moved towards digit 2. 0.33 u from its place it stands 2.3
+  // scatters from the halfway line and is read; at 0.37 u, 1.7 scatters, it is refused,
+  // as decode() refuses it.
+  const Family f(3);
+  const TagId id = 6789;
+  const auto p = prepare_raster(f, id, 8);
+  ASSERT_TRUE(p);
+  Candidate c = in_cell_order(*p);
+  for (std::size_t j = 0; j < c.blobs.size(); ++j) {
+    c.blobs[j].point.x += (p->blob_of_cell[j] % 2 ? 0.1 : -0.1);
+    c.blobs[j].point.y += (p->blob_of_cell[j] % 3 ? 0.1 : -0.1);
+  }
+  DetectorParams loose;  // the residual bound opened: the noise margin decides
+  loose.max_cell_residual = 0.6;
+  DetectionStats stats;
+  for (const auto& [shift, accepted] : {std::pair{0.33, true}, std::pair{0.37, false}}) {
+    Candidate moved = c;
+    moved.blobs[4].point.x += shift * 8;
+    const auto d = detail::decode_expected(moved, id, ImageView(p->image), p->camera, loose, stats);
+    EXPECT_EQ(d.has_value(), accepted) << shift;
+    if (d) {
+      EXPECT_NEAR(d->noise_margin, 2.28, 0.1) << shift;
+    }
+  }
+  // A 2x2 (four squares fix the homography, no noise to weigh) is left to decode().
+  const auto two = prepare_raster(Family(2), 5, 8);
+  ASSERT_TRUE(two);
+  EXPECT_FALSE(
+      detail::decode_expected(in_cell_order(*two), 5, ImageView(two->image), two->camera, DetectorParams{}, stats));
 }
 
 TEST(Decode, ErrorMetricAndHomography) {
