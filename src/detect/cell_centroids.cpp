@@ -89,7 +89,7 @@ Quad observed_quad(const cv::Point2d* corners, const ImageView& image) {
 
 std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
                                         const cv::Matx33d& homography, const PaperLevel& paper_level,
-                                        std::vector<CellInk>* inks, double grow, double ring_units) {
+                                        std::vector<CellInk>* inks, double grow, double ring_units, int stride) {
   const double side = family.side();
   if (!(smallest_scale(homography, {side / 2, side / 2}) >= kMinPixelsPerUnit)) return {};
   std::vector<cv::Point2d> out;
@@ -104,7 +104,7 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
     add_grown(s, grow + ring_units, homography, corners);
   }
   distort(camera, corners);
-  std::vector<std::pair<int, int>> spans;  // the window's, row by row from its top
+  std::vector<std::pair<int, int>> spans;  // the window's, on the rows the ring's count visits
   for (int g = 0; g < family.cell_count(); ++g) {
     const Quad window = observed_quad(&corners[8 * std::size_t(g)], image);
     const Quad paper = observed_quad(&corners[8 * std::size_t(g) + 4], image);
@@ -114,15 +114,14 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
     // The paper level: the median grey of the ring between the two.
     std::array<int, 256> ring{};
     int ring_size = 0;
-    spans.clear();
-    for (int y = paper.top; y <= paper.bottom; ++y) {
+    spans.assign(std::size_t(std::max(0, window.bottom - window.top + 1)), {1, 0});
+    for (int y = paper.top; y <= paper.bottom; y += stride) {
       const auto [a, b] = paper.span(y);
       const auto [wa, wb] = window.span(y);
-      if (y >= window.top && y <= window.bottom) spans.emplace_back(wa, wb);
+      if (y >= window.top && y <= window.bottom) spans[std::size_t(y - window.top)] = {wa, wb};
       const std::uint8_t* row = image.data + y * image.stride;
       const auto count = [&](int from, int to) {
-        for (int x = from; x <= to; ++x) ++ring[row[x]];
-        ring_size += std::max(0, to - from + 1);
+        for (int x = from; x <= to; x += stride) ++ring[row[x]], ++ring_size;
       };
       if (wa > wb) {  // the window misses the row
         count(a, b);
@@ -138,12 +137,13 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
     // (The window lies within its ring's rows unless the lens folds them.)
     const bool cached = window.top >= paper.top && window.bottom <= paper.bottom;
     double m = 0, mx = 0, my = 0;
-    for (int y = window.top; y <= window.bottom; ++y) {
+    const int first = window.top + ((paper.top - window.top) % stride + stride) % stride;  // a row the ring's visits
+    for (int y = first; y <= window.bottom; y += stride) {
       const auto [a, b] = cached ? spans[std::size_t(y - window.top)] : window.span(y);
       const std::uint8_t* row = image.data + y * image.stride;
       if (!paper_level.local.empty()) {  // a shadow: each pixel against the paper under it
         double row_m = 0, row_mx = 0;
-        for (int x = a; x <= b; ++x) {
+        for (int x = a; x <= b; x += stride) {
           const double ink = paper_level.ink(x, y, row[x]);
           row_m += ink, row_mx += ink * x;
         }
@@ -151,7 +151,7 @@ std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& ca
         continue;
       }
       std::int64_t row_m = 0, row_mx = 0;
-      for (int x = a; x <= b; ++x) {
+      for (int x = a; x <= b; x += stride) {
         const int ink = std::max(0, white - row[x]);
         row_m += ink, row_mx += std::int64_t(ink) * x;
       }

@@ -707,11 +707,13 @@ struct CellInk {
   double paper = 0;  // the ring's median grey
 };
 // `grow`: the units each window adds round its square (half the narrowest gap, 2 units,
-// unless a caller needs to reach further); `ring_units`: the width of the ring round it.
+// unless a caller needs to reach further); `ring_units`: the width of the ring round it;
+// `stride`: every stride-th row and column of both taken (a coarse look, for finding
+// where the squares are rather than measuring them).
 std::vector<cv::Point2d> cell_centroids(const ImageView& image, const Camera& camera, const Family& family, TagId id,
                                         const cv::Matx33d& homography, const PaperLevel& paper = {},
                                         std::vector<CellInk>* inks = nullptr, double grow = 0.5,
-                                        double ring_units = 0.5);
+                                        double ring_units = 0.5, int stride = 1);
 
 // ---------------------------------------------------------------- border_edges.cpp
 // A point of the border's stroke, seen: the marker-frame point `object` on the stroke's

@@ -19,6 +19,7 @@
 // puts it than the windows reach is left to the patch's search.
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 #include <utility>
 
 #include "../core/geometry.hpp"
@@ -41,6 +42,10 @@ constexpr double kRing = 0.5;  // the paper's ring round each window, units (as 
 // finds it.
 constexpr int kMaxRefits = 6;
 constexpr double kCoarseSettled = 0.2, kSettled = 0.05;
+// The wide windows only bring the squares within the narrow ones' reach: from this many
+// pixels per unit they take every other row and column (still a sample a unit each way),
+// a quarter of the pixels; the narrow windows, whose centroids the pose uses, take all.
+constexpr double kCoarseStridePixels = 2;
 }  // namespace
 
 std::optional<TrackedMeasurement> measure_tracked(const ImageView& image, const Camera& camera,
@@ -62,9 +67,11 @@ std::optional<TrackedMeasurement> measure_tracked(const ImageView& image, const 
   // until the squares stay where they are.
   std::vector<cv::Point2d> centroids, points;
   std::vector<CellInk> inks;
-  for (const auto& [grow, settled] : {std::pair(kCoarseGrow, kCoarseSettled * unit), std::pair(kFineGrow, kSettled)})
+  const int coarse_stride = unit >= kCoarseStridePixels ? 2 : 1;
+  for (const auto& [grow, settled, stride] :
+       {std::tuple(kCoarseGrow, kCoarseSettled * unit, coarse_stride), std::tuple(kFineGrow, kSettled, 1)})
     for (int refit = 0;; ++refit) {
-      centroids = cell_centroids(image, camera, family, id, *h, PaperLevel(), &inks, grow, kRing);
+      centroids = cell_centroids(image, camera, family, id, *h, PaperLevel(), &inks, grow, kRing, stride);
       if (centroids.empty()) return std::nullopt;
       const std::vector<cv::Point2d> before = std::exchange(points, camera.undistort(centroids));
       double moved = before.empty() ? HUGE_VAL : 0;

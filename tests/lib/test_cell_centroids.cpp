@@ -113,6 +113,30 @@ TEST(CellCentroids, UnevenLightDoesNotMoveThem) {
     }
 }
 
+TEST(CellCentroids, EveryOtherRowAndColumnFindsTheSquaresNearlyWhereAllDo) {
+  // A coarse look (stride 2) weighs a quarter of the pixels: its centroids lie within
+  // 0.1 units of the full look's on 2 to 4 px-a-unit markers, close enough to centre the
+  // narrower windows that measure them, and its paper level is the same.
+  std::mt19937_64 rng(9);
+  for (int n : {3, 4, 6})
+    for (const double pixels : {2.0 * (6 * n + 6), 4.0 * (6 * n + 6)}) {
+      const Rendered r = render(n, pixels, 0.6, 0.3, rng);
+      std::vector<detail::CellInk> all_inks, coarse_inks;
+      const auto all = cell_centroids(ImageView(r.image), kCamera, r.marker.family, r.marker.id, r.homography, {},
+                                      &all_inks, 1, 0.5, 1);
+      const auto coarse = cell_centroids(ImageView(r.image), kCamera, r.marker.family, r.marker.id, r.homography, {},
+                                         &coarse_inks, 1, 0.5, 2);
+      ASSERT_EQ(all.size(), std::size_t(n * n));
+      ASSERT_EQ(coarse.size(), all.size());
+      const double unit = pixels / (6 * n + 6);
+      for (int g = 0; g < n * n; ++g) {
+        EXPECT_LT(cv::norm(coarse[g] - all[g]), 0.1 * unit) << n << " " << pixels << " cell " << g;
+        EXPECT_NEAR(coarse_inks[g].mass / all_inks[g].mass, 0.25, 0.05) << n << " " << pixels << " cell " << g;
+        EXPECT_NEAR(coarse_inks[g].paper, all_inks[g].paper, 3) << n << " " << pixels << " cell " << g;
+      }
+    }
+}
+
 TEST(CellCentroids, TheWindowsFollowTheLensDistortion) {
   // Strong barrel distortion, 70 px markers towards the frame's corners, where it bends
   // their squares' places by pixels: the windows, placed under the homography of the
