@@ -749,8 +749,9 @@ std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints
     return found;
   }
   detail::threshold_mean(image, p.threshold_window, p.threshold_offset, s.mean, s.binary);
+  const double noise = detail::estimate_noise(image);
   stats.threshold_ms = elapsed_ms(start);
-  if (trace) trace->binary = s.binary.to_mat();
+  if (trace) trace->binary = s.binary.to_mat(), trace->noise = noise;
 
   start = Clock::now();
   s.labeller.label(s.binary, s.tree);
@@ -792,6 +793,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints
     detail::SecondLook look;
     look.sought.reset();
     for (const Family& f : p.families) look.sought.set(f.n());
+    look.noise = noise;
     const auto taken_boxes = [&] {
       std::vector<cv::Rect> taken;
       for (const Detection& d : found)

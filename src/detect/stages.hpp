@@ -91,6 +91,12 @@ struct BinaryImage {
 // `offset`. `mean` is scratch space kept between frames.
 void threshold_mean(const ImageView& image, int window, int offset, cv::Mat& mean, BinaryImage& out);
 
+// The standard deviation of the image's pixel noise in grey levels, from the median
+// response of a mask that cancels planes (the product of two second differences,
+// Immerkaer 1996) over every `row_step`-th row: a texture shows in a minority of pixels,
+// noise in all (a frame of dense texture reads as noisy).
+double estimate_noise(const ImageView& image, int row_step = 16);
+
 // ---------------------------------------------------------------- regions.cpp
 // Set bits of x, inline: the build targets x86-64 without POPCNT, where the builtin is a
 // library call that took a fifth of a clean frame's labelling.
@@ -336,6 +342,7 @@ struct SecondLook {
   int min_size = 6;  // frame pixels, the cluster's longer side
   int max_size = 192;
   int enlarge_below = 64;  // clusters smaller than this are enlarged twice
+  double noise = 0;        // the frame's pixel noise (estimate_noise), grey levels
   // The n x n families sought (bit n): resolved markers of the others are not looked at
   // again (see near_candidates).
   std::bitset<Family::kMaxN + 1> sought = std::bitset<Family::kMaxN + 1>().set().reset(0).reset(1);

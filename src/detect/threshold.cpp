@@ -8,6 +8,9 @@
 // passes along the row give them with 16-bit lanes and no division, in half the box
 // filter's time, which was a third of a frame's. Other windows use the box filter itself.
 #include <algorithm>
+#include <array>
+#include <cstdlib>
+#include <vector>
 
 #include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
@@ -115,6 +118,43 @@ void threshold_power_of_two(const cv::Mat& grey, int window, std::uint8_t off, c
 }
 
 }  // namespace
+
+double estimate_noise(const ImageView& image, int row_step) {
+  // The mask's taps are two pixels apart: a codec (JPEG, H.264) quantises away nearly all
+  // of the noise that neighbouring pixels show and keeps most of what the threshold's
+  // window sees.
+  constexpr int kSpacing = 2;
+  const int w = image.width, h = image.height;
+  if (w <= 2 * kSpacing || h <= 2 * kSpacing) return 0;
+  // |response| of each sampled pixel; for white Gaussian noise of deviation s the response
+  // has deviation 6 s (the mask's norm), so its median is 0.6745 x 6 s.
+  constexpr int kBins = 1024;
+  std::array<std::int64_t, kBins> histogram{};
+  std::vector<int> second(std::size_t(w), 0);  // a column's second difference
+  std::int64_t samples = 0;
+  for (int y = kSpacing; y + kSpacing < h; y += row_step) {
+    const std::uint8_t* at = image.data + std::ptrdiff_t(y) * image.stride;
+    const std::uint8_t* up = at - std::ptrdiff_t(kSpacing) * image.stride;
+    const std::uint8_t* down = at + std::ptrdiff_t(kSpacing) * image.stride;
+    for (int x = 0; x < w; ++x) second[std::size_t(x)] = int(up[x]) - 2 * int(at[x]) + int(down[x]);
+    for (int x = kSpacing; x + kSpacing < w; ++x) {
+      const int r =
+          std::abs(second[std::size_t(x - kSpacing)] - 2 * second[std::size_t(x)] + second[std::size_t(x + kSpacing)]);
+      ++histogram[std::size_t(std::min(r, kBins - 1))];
+    }
+    samples += w - 2 * kSpacing;
+  }
+  if (samples == 0) return 0;
+  std::int64_t below = 0;
+  int median = 0;
+  while (median < kBins - 1 && 2 * (below + histogram[std::size_t(median)]) <= samples)
+    below += histogram[std::size_t(median++)];
+  // Interpolated within the median's bin, the integers m - 1/2 to m + 1/2 (0 to 1/2 for 0).
+  const double count = double(std::max<std::int64_t>(histogram[std::size_t(median)], 1));
+  const double within = (0.5 * double(samples) - double(below)) / count;
+  const double r = median == 0 ? 0.5 * within : median - 0.5 + within;
+  return r / (0.6745 * 6);
+}
 
 cv::Mat1b BinaryImage::to_mat() const {
   cv::Mat1b out(height, width);

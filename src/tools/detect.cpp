@@ -219,6 +219,7 @@ void add_detect_command(CLI::App& app, int& status) {
         for (const Detection& d : found) out["detections"].push_back(io::detection_json(d));
         if (opt->stats) out["stats"] = stats_json(stats);
         if (opt->why) {
+          out["noise"] = trace.noise;
           out["candidates"] = nlohmann::json::array();
           for (const CandidateVerdict& v : trace.verdicts) out["candidates"].push_back(verdict_json(v));
           out["outline_reads"] = nlohmann::json::array();

@@ -95,6 +95,26 @@ TEST(NearCandidates, BlobsLettersTexturesAndTakenPlacesAreNot) {
   EXPECT_TRUE(clusters_of(huge).empty());
 }
 
+// In a dim frame the threshold's offset is within the sensor's noise, and flat paper
+// breaks into specks that cluster as a far marker's pieces do: a cluster is looked at only
+// when its ink stands well out of the frame's noise (kMinNoiseContrast of 6 deviations).
+TEST(NearCandidates, ClustersOfSensorNoiseAreNot) {
+  cv::Mat1b black(120, 160, std::uint8_t(0));
+  draw_pieces(black, 30, 40);
+  const auto looked_at = [&](int contrast, double noise) {
+    cv::Mat1b grey(black.size(), std::uint8_t(120));
+    grey.setTo(120 - contrast, black);
+    detail::SecondLook look;
+    look.noise = noise;
+    return clusters_of(black, {}, look, grey).size();
+  };
+  EXPECT_EQ(looked_at(15, 0), 1u);  // a faint cluster in a clean frame
+  EXPECT_EQ(looked_at(15, 5), 0u);  // the noise's own dark tail: 3 deviations
+  EXPECT_EQ(looked_at(29, 5), 0u);
+  EXPECT_EQ(looked_at(31, 5), 1u);
+  EXPECT_EQ(looked_at(60, 5), 1u);  // a dim frame's far marker
+}
+
 TEST(NearCandidates, AClosedBorderAroundSomeSquaresIsLookedAt) {
   // A marker turned 45 degrees whose border stayed closed, two of its nine squares joined
   // to it: its box is only a quarter ink, so it fails as a cluster, but the border with

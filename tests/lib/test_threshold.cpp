@@ -244,3 +244,25 @@ TEST(Threshold, ToMatIs255ForBlack) {
       EXPECT_EQ(m(y, x), black ? 255 : 0) << x << ", " << y;
     }
 }
+
+// The noise estimate reads the pixels' noise, not the picture: edges and gradients
+// without noise read as the rounding to grey levels alone.
+TEST(NoiseEstimate, IsThePixelsDeviationAndNotTheirEdgesOrGradients) {
+  cv::Mat1f picture(480, 640);
+  for (int y = 0; y < picture.rows; ++y)
+    for (int x = 0; x < picture.cols; ++x) picture(y, x) = float(60 + 0.15 * x + 0.1 * y);
+  for (int i = 0; i < 12; ++i)  // dark rectangles: edges in both directions
+    picture(cv::Rect(20 + 50 * i, 40 + 25 * (i % 5), 30, 60)).setTo(20);
+  cv::Mat1b clean;
+  picture.convertTo(clean, CV_8U);
+  EXPECT_LT(detail::estimate_noise(ImageView(clean)), 0.35);  // the rounding to grey levels: 0.29
+  for (const double sigma : {2.0, 4.0, 6.0}) {
+    cv::Mat1f noise(picture.size());
+    cv::RNG(7).fill(noise, cv::RNG::NORMAL, 0.0, sigma);
+    cv::Mat1b noisy;
+    cv::Mat1f(picture + noise).convertTo(noisy, CV_8U);
+    EXPECT_NEAR(detail::estimate_noise(ImageView(noisy)), sigma, 0.12 * sigma) << sigma;
+  }
+  EXPECT_EQ(detail::estimate_noise(ImageView(cv::Mat1b(4, 4, uchar(9)))), 0.0);
+  EXPECT_EQ(detail::estimate_noise(ImageView(cv::Mat1b())), 0.0);
+}

@@ -151,6 +151,7 @@ struct BorderVerdict {
 // What the stages saw, for debug images (see draw.hpp) and for tuning: filled only on request.
 struct DetectionTrace {
   cv::Mat binary;                                                 // 255 = black, as thresholded
+  double noise = 0;                                               // the frame's pixel noise (grey levels)
   std::vector<std::vector<cv::Point2d>> candidates;               // blob centroids of every topological candidate
   std::vector<std::array<cv::Point2d, 4>> keypoints;              // K0..K3 of candidates that passed the constraints
   std::vector<std::vector<std::vector<cv::Point2d>>> hypotheses;  // per candidate: 16 projected inner edges
