@@ -749,7 +749,8 @@ std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints
     return found;
   }
   detail::threshold_mean(image, p.threshold_window, p.threshold_offset, s.mean, s.binary);
-  const double noise = detail::estimate_noise(image);
+  // Only the second look uses the noise (and --why reports it).
+  const double noise = p.second_look || trace ? detail::estimate_noise(image) : 0.0;
   stats.threshold_ms = elapsed_ms(start);
   if (trace) trace->binary = s.binary.to_mat(), trace->noise = noise;
 
