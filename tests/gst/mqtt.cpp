@@ -204,11 +204,13 @@ std::vector<std::string> run_to_eos(GstElement* pipeline, std::vector<std::strin
   return warnings;
 }
 
+// The file's complete lines: polled while the publisher writes, its last line may still
+// be on its way (no newline yet).
 std::vector<nlohmann::json> read_lines(const std::string& path) {
   std::vector<nlohmann::json> lines;
   std::ifstream in(path);
   std::string line;
-  while (std::getline(in, line)) lines.push_back(nlohmann::json::parse(line));
+  while (std::getline(in, line) && !in.eof()) lines.push_back(nlohmann::json::parse(line));
   return lines;
 }
 
