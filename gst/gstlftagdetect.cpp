@@ -144,6 +144,7 @@ enum {
   PROP_SMOOTHING_MIN_CUTOFF,
   PROP_SMOOTHING_BETA,
   PROP_FULL_DETECTION_INTERVAL,
+  PROP_IDS,
 };
 
 #define DEFAULT_PROP_FAMILIES "3x3,4x4"
@@ -211,9 +212,10 @@ struct Settings {
   lftag::DetectorParams detector = lftag::io::front_end_defaults(); /* families, tag size, the tunables */
   lftag::gst::CameraSettings camera;
   std::string families_text = DEFAULT_PROP_FAMILIES;
+  std::string ids_text;      /* as set; empty: every id */
   bool tag_size_set = false; /* a metric pose was asked for */
   /* A refused value (lftag::gst::refuse_value), until a good value clears it. */
-  std::string families_error;
+  std::string families_error, ids_error;
   guint overlay = DEFAULT_PROP_OVERLAY;
   GstLFTagDetectMessages messages = DEFAULT_PROP_MESSAGES;
   bool message_detections = DEFAULT_PROP_MESSAGE_DETECTIONS;
@@ -337,6 +339,14 @@ static void gst_lftag_detect_class_init(GstLFTagDetectClass* klass) {
                           "Marker families to detect, comma-separated, from 2x2 to 8x8 (for "
                           "example 3x3,4x4,6x6); every family costs a little time. Unset: the default",
                           DEFAULT_PROP_FAMILIES, playing));
+  g_object_class_install_property(
+      gobject_class, PROP_IDS,
+      g_param_spec_string("ids", "Ids",
+                          "The ids in use, comma-separated, with ranges (for example 0-49,100): a marker read as "
+                          "another id is not reported, so that someone else's marker, or a misreading that "
+                          "lands outside the ids printed, never reaches the meta or the messages. Each must be "
+                          "an id of one of the families. Unset or empty: every id",
+                          nullptr, playing));
   g_object_class_install_property(
       gobject_class, PROP_TAG_SIZE,
       g_param_spec_double("tag-size", "Tag size",
@@ -497,6 +507,21 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
 
   std::vector<Family> families;
   std::string families_text;
+  std::vector<lftag::TagId> ids;
+  if (prop_id == PROP_IDS) {
+    /* Refused as the families are: a list that does not parse leaves the ids as they
+     * were. An id of no family searched fails when the detector is built. */
+    const gchar* text = g_value_get_string(value);
+    try {
+      if (text && *text) ids = lftag::parse_id_list(text);
+    } catch (const std::exception& e) {
+      const std::string refusal = lftag::gst::refuse_value(GST_ELEMENT(self), "ids", text, e.what());
+      GST_OBJECT_LOCK(self);
+      self->settings->ids_error = refusal;
+      GST_OBJECT_UNLOCK(self);
+      return;
+    }
+  }
   if (prop_id == PROP_FAMILIES) {
     /* "3x3, 4X4" is read as 3x3,4x4. A value that names no family is refused on the bus
      * (a warning now, while playing; an error when the element starts, for a value set
@@ -527,6 +552,13 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
       s.families_error.clear();
       s.detector.families = std::move(families);
       break;
+    case PROP_IDS: {
+      const gchar* text = g_value_get_string(value);
+      s.ids_text = text ? text : "";
+      s.ids_error.clear();
+      s.detector.ids = std::move(ids);
+      break;
+    }
     case PROP_TAG_SIZE:
       s.detector.tag_size = g_value_get_double(value);
       s.tag_size_set = true;
@@ -558,6 +590,7 @@ static void gst_lftag_detect_get_property(GObject* object, guint prop_id, GValue
   } else {
     switch (prop_id) {
       case PROP_FAMILIES: g_value_set_string(value, s.families_text.c_str()); break;
+      case PROP_IDS: g_value_set_string(value, s.ids_text.empty() ? nullptr : s.ids_text.c_str()); break;
       case PROP_TAG_SIZE: g_value_set_double(value, s.detector.tag_size); break;
       case PROP_OVERLAY: g_value_set_flags(value, s.overlay); break;
       case PROP_MESSAGES: g_value_set_enum(value, s.messages); break;
@@ -598,8 +631,8 @@ static gboolean gst_lftag_detect_start(GstBaseTransform* trans) {
   st.messages.reset();
   st.tracker.reset();
   st.unsearched = 0;
-  if (!lftag::gst::no_refused_values(
-          GST_ELEMENT(self), {&s.families_error, &s.camera.distortion_error, &s.camera.cx_error, &s.camera.cy_error}))
+  if (!lftag::gst::no_refused_values(GST_ELEMENT(self), {&s.families_error, &s.ids_error, &s.camera.distortion_error,
+                                                         &s.camera.cx_error, &s.camera.cy_error}))
     return FALSE;
   st.warned_budget = false;
   st.warned_layout = false;

@@ -68,11 +68,19 @@ void DetectorParams::validate() const {
   if (!(tag_size > 0) || !std::isfinite(tag_size)) fail("the tag size must be positive");
   if (!(shape_choice_ratio >= 0)) fail("the shape choice ratio must be at least 0 (0: by the centroids alone)");
   if (camera) camera->validate();
+  for (const TagId& id : ids)
+    if (std::none_of(families.begin(), families.end(), [&](const Family& f) { return f.contains(id); }))
+      fail("id " + id.to_decimal() + " is not an id of any family detected (the largest is " +
+           std::max_element(families.begin(), families.end(),
+                            [](const Family& a, const Family& b) { return a.n() < b.n(); })
+               ->max_id()
+               .to_decimal() +
+           ")");
 }
 
 namespace {
 auto fields(const DetectorParams& p) {
-  return std::tie(p.families, p.threshold_window, p.threshold_offset, p.second_look, p.max_second_looks,
+  return std::tie(p.families, p.ids, p.threshold_window, p.threshold_offset, p.second_look, p.max_second_looks,
                   p.max_candidates, p.deadline_ms, p.min_child_fraction, p.max_child_ratio, p.max_extra_children,
                   p.dilation, p.centroid_reference, p.max_ink_ratio, p.min_spread_ratio, p.max_decode_error,
                   p.max_cell_residual, p.min_pixels_per_unit, p.min_decode_margin, p.min_noise_margin, p.max_ink_spread,
@@ -90,7 +98,8 @@ double DetectionStats::total_ms() const {
 DetectionStats& DetectionStats::operator+=(const DetectionStats& o) {
   frames += o.frames, regions += o.regions, topology += o.topology, area += o.area, geometry += o.geometry;
   angle += o.angle, collinearity += o.collinearity, residual += o.residual, unambiguous += o.unambiguous;
-  decoded += o.decoded, bowed += o.bowed, second_looks += o.second_looks, second_look_found += o.second_look_found;
+  decoded += o.decoded, unlisted += o.unlisted, bowed += o.bowed, second_looks += o.second_looks,
+      second_look_found += o.second_look_found;
   outline_reads += o.outline_reads, outline_found += o.outline_found, outline_reads_skipped += o.outline_reads_skipped;
   expected_reads += o.expected_reads, expected_found += o.expected_found, expected_measured += o.expected_measured;
   borders += o.borders, border_found += o.border_found, borders_ms += o.borders_ms;
@@ -679,6 +688,7 @@ const char* stage_name(Stage stage) {
     case Stage::ink: return "ink";
     case Stage::marker: return "marker";
     case Stage::unexpected: return "unexpected";
+    case Stage::unlisted: return "unlisted";
     case Stage::pose: return "pose";
     case Stage::duplicate: return "duplicate";
     case Stage::detected: return "detected";
@@ -686,8 +696,33 @@ const char* stage_name(Stage stage) {
   return "?";
 }
 
+namespace {
+
+// The detections whose id is not in `listed` (sorted; empty: every id is) taken out of
+// `found` and counted, and the verdicts that read them marked so in `trace`. They are
+// taken out only now so that, found, they kept their places from being read again.
+void drop_unlisted(const std::vector<TagId>& listed, std::vector<Detection>& found, DetectionStats& stats,
+                   DetectionTrace* trace) {
+  if (listed.empty()) return;
+  const auto is_listed = [&](TagId id) { return std::binary_search(listed.begin(), listed.end(), id); };
+  const auto unlisted =
+      std::remove_if(found.begin(), found.end(), [&](const Detection& d) { return !is_listed(d.id); });
+  stats.unlisted += found.end() - unlisted;
+  found.erase(unlisted, found.end());
+  if (!trace) return;
+  const auto mark = [&](auto& verdicts) {
+    for (auto& v : verdicts)
+      if (v.stage == Stage::detected && v.reading && !is_listed(*v.reading)) v.stage = Stage::unlisted;
+  };
+  mark(trace->verdicts);
+  mark(trace->outline_reads);
+}
+
+}  // namespace
+
 struct Detector::Impl {
   DetectorParams params;
+  std::vector<TagId> listed;  // params.ids, sorted
   cv::Mat mean;
   detail::BinaryImage binary;
   detail::RegionLabeller labeller;
@@ -708,6 +743,8 @@ struct Detector::Impl {
 
 Detector::Detector(DetectorParams params) : impl_(std::make_unique<Impl>()) {
   params.validate();
+  impl_->listed = params.ids;
+  std::sort(impl_->listed.begin(), impl_->listed.end());
   impl_->params = std::move(params);
 }
 Detector::~Detector() = default;
@@ -744,6 +781,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints
                   p.max_candidates > 0 ? &budget : nullptr, stats, found, read_places, trace);
     stats.expected_ms = elapsed_ms(start);
     stats.past_deadline = stats.skipped_by_deadline > 0 ? 1 : 0;
+    drop_unlisted(s.listed, found, stats, trace);
     if (trace) trace->detections = found;
     if (stats_out) *stats_out += stats;
     return found;
@@ -850,6 +888,7 @@ std::vector<Detection> Detector::detect(const ImageView& image, const FrameHints
   }
 
   stats.past_deadline = cut || stats.skipped_by_deadline > skipped_before ? 1 : 0;
+  drop_unlisted(s.listed, found, stats, trace);
   if (trace) trace->detections = found;
   if (stats_out) *stats_out += stats;
   return found;

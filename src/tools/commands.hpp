@@ -31,17 +31,21 @@ inline CLI::Validator finite_in(double lo, double hi) {
 // option not given is empty (never a number standing for "not given": --cx 0 is 0).
 struct DetectorOptions {
   std::string families = "3x3,4x4", calibration;
+  std::string ids;          // --ids: the ids in use (empty: every id)
   PinholeSettings pinhole;  // --fx, --fy, --cx, --cy (no distortion: it comes with --calibration)
   double tag_size = 0.1;
   // The tunables (io/tunables.hpp), one option each, as lftagdetect's properties.
   DetectorParams params = io::front_end_defaults();
 };
-// Adds --family, --fx, --fy, --cx, --cy, --calibration, --tag-size and one option per
+// Adds --family, --ids, --fx, --fy, --cx, --cy, --calibration, --tag-size and one option per
 // tunable (--threshold-window, --max-candidates, --deadline, ...) to `cmd`, stored in
 // `options` (which must outlive the parse).
 void add_detector_options(CLI::App* cmd, DetectorOptions& options);
 // Throws std::invalid_argument when --fy, --cx or --cy is given without --fx.
 void check_camera_options(const DetectorOptions& options);
+// The families and ids of `options` (--family, --ids) in `params`, then params.validate();
+// throws std::invalid_argument saying what is wrong.
+void set_families_and_ids(const DetectorOptions& options, DetectorParams& params);
 
 void add_generate_command(CLI::App& app, int& status);
 void add_render_command(CLI::App& app, int& status);

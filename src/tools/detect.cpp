@@ -30,6 +30,7 @@ nlohmann::json stats_json(const DetectionStats& s) {
             {"residual", s.residual},
             {"unambiguous", s.unambiguous},
             {"decoded", s.decoded},
+            {"unlisted", s.unlisted},
             {"bowed", s.bowed},
             {"second_looks", s.second_looks},
             {"second_look_found", s.second_look_found},
@@ -110,6 +111,9 @@ nlohmann::json border_json(const BorderVerdict& v) {
 
 void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
   cmd->add_option("--family", o.families, "Families to detect, comma-separated (default 3x3,4x4)");
+  cmd->add_option("--ids", o.ids,
+                  "The ids in use, comma-separated, with ranges (for example 0-49,100): a marker read as another id "
+                  "is not reported. Each must be an id of one of the families (default: every id)");
   PinholeSettings& pin = o.pinhole;
   cmd->add_option("--fx", pin.fx, "Focal length in pixels (x)")->check(finite_in(Camera::kMinFocal, Camera::kMaxFocal));
   cmd->add_option("--fy", pin.fy, "Focal length in pixels (y; default fx)")
@@ -152,6 +156,16 @@ void add_detector_options(CLI::App* cmd, DetectorOptions& o) {
   }
 }
 
+void set_families_and_ids(const DetectorOptions& o, DetectorParams& params) {
+  params.families = Family::parse_list(o.families);
+  try {
+    params.ids = o.ids.empty() ? std::vector<TagId>() : parse_id_list(o.ids);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("--ids: ") + e.what());
+  }
+  params.validate();  // each id is one of a family's
+}
+
 void check_camera_options(const DetectorOptions& o) {
   const PinholeSettings& pin = o.pinhole;
   if (!pin.fx && (pin.fy || pin.cx || pin.cy)) throw std::invalid_argument("--fy, --cx and --cy need --fx");
@@ -171,17 +185,17 @@ void add_detect_command(CLI::App& app, int& status) {
   cmd->add_flag("--stats", opt->stats,
                 "Add the candidate funnel (with the candidates and second looks the budget skipped) and "
                 "per-stage times to each object");
-  cmd->add_flag(
-      "--why", opt->why,
-      "Add \"candidates\": every topological candidate with the stage that stopped it (area, "
-      "budget, deadline, geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate) or "
-      "\"detected\"");
+  cmd->add_flag("--why", opt->why,
+                "Add \"candidates\": every topological candidate with the stage that stopped it (area, "
+                "budget, deadline, geometry, angle, collinearity, resolution, decoding, margin, ink, pose, duplicate, "
+                "unlisted) or "
+                "\"detected\"");
   cmd->add_option("--debug-dir", opt->debug_dir,
                   "Write each image's stages there: threshold, candidates, keypoints, hypotheses, final");
   cmd->callback([opt, &status] {
     DetectorParams base = opt->params;
     try {
-      base.families = Family::parse_list(opt->families);
+      set_families_and_ids(*opt, base);
       base.tag_size = opt->tag_size;
       check_camera_options(*opt);
       if (!opt->calibration.empty()) base.camera = Camera::load(opt->calibration);

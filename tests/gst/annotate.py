@@ -160,6 +160,11 @@ def options_reach_the_detector():
     result = annotate(recording(), "--jsonl", "-", "--fx", "640", "--tag-size", "0.05", "-q")
     poses = [d["pose"] for line in result.stdout.splitlines() for d in json.loads(line)["detections"]]
     assert poses and all(p["calibrated"] and p["tag_size"] == 0.05 for p in poses), poses[:1]
+    # The ids in use: the others are not reported.
+    kept = IDS[0]
+    result = annotate(recording(), "--jsonl", "-", "-q", "--ids", f"{kept},1-2")
+    found = {d["id"] for line in result.stdout.splitlines() for d in json.loads(line)["detections"]}
+    assert found == {kept}, found
 
 
 @case
@@ -268,6 +273,8 @@ def mistakes_end_with_one_line_and_no_file():
         ((recording(), "--output", path("m.mp4"), "--jsonl", "/nonexistent-dir/m.jsonl"), 1, "m.jsonl"),
         ((recording(), "--output", path("m.xyz")), 2, ".mp4"),
         ((recording(), "--output", path("m.mp4"), "--family", "9x9"), 2, "9x9"),
+        ((recording(), "--output", path("m.mp4"), "--family", "3x3", "--ids", "16384"), 2, "16384"),
+        ((recording(), "--output", path("m.mp4"), "--ids", "4-1"), 2, "--ids"),
         ((recording(), "--output", path("m.mp4"), "--overlay", "outline,box"), 2, "box"),
         ((recording(), "--output", path("m.mp4"), "--calibration", path("none.yml")), 2, "none.yml"),
         ((recording(),), 2, "--output"),

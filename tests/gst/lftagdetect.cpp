@@ -1238,6 +1238,37 @@ GST_START_TEST(test_bad_calibration_files) {
 }
 GST_END_TEST;
 
+// Only the ids in use reach the meta: the others are as if not there, the stream goes on,
+// and unset the ids are every id again. An id of no family searched fails at the start.
+GST_START_TEST(test_ids) {
+  Frames frames;
+  pull_frames(frames, "lftagtestsrc num-buffers=1 ids=6789,42", "video/x-raw,format=NV12", 1);
+  GstHarness* h = detector("ids=42,100-200", frames.info);
+  GstElement* e = element_of(h);
+  const auto push = [&]() {
+    GstBuffer* out = gst_harness_push_and_pull(h, gst_buffer_copy_deep(frames.buffers[0]));
+    const std::vector<std::string> ids = sorted_ids(detections_of(out).detections);
+    gst_buffer_unref(out);
+    return ids;
+  };
+  fail_unless(push() == std::vector<std::string>{"3x3:42"});
+  g_object_set(e, "ids", "0-41,43-6788", nullptr);
+  fail_unless(push().empty());
+  g_object_set(e, "ids", "7,x", nullptr);  // refused (test_bad_families): the ids stay
+  fail_unless(push().empty());
+  gchar* ids = nullptr;
+  g_object_get(e, "ids", &ids, nullptr);
+  fail_unless_equals_string(ids, "0-41,43-6788");
+  g_free(ids);
+  g_object_set(e, "ids", nullptr, nullptr);
+  fail_unless((push() == std::vector<std::string>{"3x3:42", "3x3:6789"}));
+  gst_harness_teardown(h);
+
+  expect_error("lftagtestsrc num-buffers=3 ! lftagdetect name=d families=3x3 ids=42,20000 ! fakesink",
+               {"20000", "not an id of any family"}, GST_RESOURCE_ERROR);
+}
+GST_END_TEST;
+
 // calibration-file is read when the element starts: a change while playing is refused
 // with a warning naming it, and the old value stays (it used to be stored and ignored).
 GST_START_TEST(test_calibration_change_while_playing) {
@@ -1749,9 +1780,16 @@ GST_END_TEST;
 // A families value that names no family: before the start, the start fails with an error
 // that names it; while playing, a warning names it and the detector keeps its families.
 GST_START_TEST(test_bad_families) {
-  const std::pair<const char*, const char*> cases[] = {
-      {"families", "9x9"},           {"families", "3x3,,4x4"},    {"families", "10x10"}, {"distortion", "0.1,x,0,0"},
-      {"distortion", "0.1,0.2,0.3"}, {"distortion", "nan,0,0,0"}, {"cx", "-0.5"},        {"cy", "-0.001"}};
+  const std::pair<const char*, const char*> cases[] = {{"families", "9x9"},
+                                                       {"families", "3x3,,4x4"},
+                                                       {"families", "10x10"},
+                                                       {"distortion", "0.1,x,0,0"},
+                                                       {"distortion", "0.1,0.2,0.3"},
+                                                       {"distortion", "nan,0,0,0"},
+                                                       {"cx", "-0.5"},
+                                                       {"cy", "-0.001"},
+                                                       {"ids", "5-2"},
+                                                       {"ids", "7,x"}};
   for (const auto& [property, bad] : cases) {
     const std::string launch = std::string("lftagtestsrc num-buffers=3 ! lftagdetect name=d fx=500 ") + property +
                                "=\"" + bad + "\" ! fakesink";
@@ -2105,6 +2143,7 @@ static Suite* lftagdetect_suite(void) {
   tcase_add_test(tc, test_tunable_properties);
   tcase_add_test(tc, test_bad_families);
   tcase_add_test(tc, test_changes_while_playing);
+  tcase_add_test(tc, test_ids);
   tcase_add_test(tc, test_changes_from_another_thread);
   tcase_add_test(tc, test_bad_calibration_files);
   tcase_add_test(tc, test_calibration);

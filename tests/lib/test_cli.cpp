@@ -376,6 +376,25 @@ TEST(Cli, DetectRejectsBadConfiguration) {
   r = run("detect --cx 100 x.png");
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.output.find("need --fx"), std::string::npos) << r.output;
+  r = run("detect --ids 9-3 x.png");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.output.find("--ids"), std::string::npos) << r.output;
+  r = run("detect --family 3x3 --ids 5,16384 x.png");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.output.find("16384 is not an id of any family"), std::string::npos) << r.output;
+}
+
+TEST(Cli, DetectReportsOnlyTheIdsInUse) {
+  const std::string image = kTmp + "/ids.png";
+  ASSERT_EQ(run("render --family 4x4 --id 777 --distance 2 --output " + image).status, 0);
+  for (const auto& [ids, found] : {std::pair{"", 1}, std::pair{"1-776,778", 0}, std::pair{"5,700-800", 1}}) {
+    const CliResult r = run(std::string("detect --stats ") + (*ids ? std::string("--ids ") + ids + " " : "") + image);
+    ASSERT_EQ(r.status, 0) << r.output;
+    const auto lines = json_lines(r.output);
+    ASSERT_EQ(lines.size(), 1u) << r.output;
+    EXPECT_EQ(int(lines[0]["detections"].size()), found) << ids;
+    EXPECT_EQ(lines[0]["stats"]["funnel"]["unlisted"].get<int>(), 1 - found) << ids;
+  }
 }
 
 TEST(Cli, CameraOptionsNotGivenAreEmptyAndZeroIsZero) {

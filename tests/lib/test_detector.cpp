@@ -240,6 +240,92 @@ TEST(Detector, SecondLookFindsMarkersUnderAxisAlignedMotionBlur) {
   EXPECT_LT(without.right, 6) << "the set-up no longer tests the second look";
 }
 
+// With DetectorParams::ids, a marker read as another id is not reported, whichever path
+// read it, and its place is not read again; the trace says why.
+TEST(Detector, OnlyTheListedIdsAreReported) {
+  SceneParams p;
+  p.camera = Camera::pinhole(1000, 1000, 639.5, 359.5, 1280, 720);
+  std::vector<SceneMarker> markers;
+  std::mt19937_64 rng(11);
+  for (int i = 0; i < 4; ++i) {
+    SceneMarker m;
+    m.family = Family(3 + i % 2);
+    m.id = random_id(m.family, rng);
+    m.tag_size = 0.15;
+    m.tvec = {-0.45 + 0.3 * i, 0.05 * i, 1.6};
+    m.rvec = rotation(30.0 * i, 20, -10);
+    markers.push_back(m);
+  }
+  const RenderedScene scene = render_scene(p, markers);
+  DetectorParams params;
+  params.families = {Family(3), Family(4)};
+  params.ids = {markers[0].id, markers[3].id, TagId(12345)};
+  Detector detector(params);
+  DetectionStats stats;
+  DetectionTrace trace;
+  const std::vector<Detection> found = detector.detect(ImageView(scene.image), &stats, &trace);
+  std::vector<TagId> ids;
+  for (const Detection& d : found) ids.push_back(d.id);
+  std::sort(ids.begin(), ids.end());
+  std::vector<TagId> listed = {markers[0].id, markers[3].id};
+  std::sort(listed.begin(), listed.end());
+  EXPECT_EQ(ids, listed);
+  EXPECT_EQ(stats.unlisted, 2);
+  EXPECT_EQ(trace.detections.size(), 2u);
+  int unlisted = 0;
+  for (const CandidateVerdict& v : trace.verdicts)
+    if (v.stage == Stage::unlisted) {
+      ++unlisted;
+      ASSERT_TRUE(v.reading.has_value());
+      EXPECT_TRUE(*v.reading == markers[1].id || *v.reading == markers[2].id);
+    }
+  EXPECT_EQ(unlisted, 2);
+  EXPECT_STREQ(stage_name(Stage::unlisted), "unlisted");
+
+  // A marker read from its outline: left out, and its place read no more often than when
+  // it is reported.
+  SceneParams blurred;
+  blurred.camera = paper_camera();
+  blurred.blur_length_px = 0.18 * 64;
+  SceneMarker m;
+  m.id = 9999;
+  m.margin_units = 6;
+  m.tvec = {0.01, -0.02, 5.0};
+  const RenderedScene outline_scene = render_scene(blurred, {m});
+  DetectorParams outline_params;
+  outline_params.families = {Family(3)};
+  outline_params.camera = paper_camera();
+  DetectionStats reported;
+  ASSERT_EQ(Detector(outline_params).detect(ImageView(outline_scene.image), &reported).size(), 1u);
+  outline_params.ids = {TagId(9998)};
+  DetectionStats left_out;
+  DetectionTrace outline_trace;
+  EXPECT_TRUE(Detector(outline_params).detect(ImageView(outline_scene.image), &left_out, &outline_trace).empty());
+  EXPECT_EQ(left_out.unlisted, 1);
+  EXPECT_EQ(left_out.outline_reads, reported.outline_reads);
+  ASSERT_FALSE(outline_trace.outline_reads.empty());
+  EXPECT_EQ(outline_trace.outline_reads.back().stage, Stage::unlisted);
+}
+
+TEST(DetectorParams, EachIdIsAnIdOfAFamily) {
+  DetectorParams params;
+  params.families = {Family(3)};
+  params.ids = {TagId(0), TagId(16383)};
+  EXPECT_NO_THROW(params.validate());
+  params.ids.push_back(TagId(16384));  // a 4x4's, not a 3x3's
+  try {
+    params.validate();
+    ADD_FAILURE() << "16384 accepted as a 3x3 id";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("16384"), std::string::npos) << e.what();
+  }
+  params.families.push_back(Family(4));
+  EXPECT_NO_THROW(params.validate());
+  DetectorParams other = params;
+  other.ids.pop_back();
+  EXPECT_NE(other, params);
+}
+
 TEST(Detector, OutlineReadingFindsMarkersWhoseSquaresTouch) {
   // Beyond what the second look's binarisation resolves (3x3 at 29 m: 11 px across, 0.46
   // px per unit; 4x4 at 23 m), and under vertical blur of 19 % of the edge (3x3, 5 m; 16 %

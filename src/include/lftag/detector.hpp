@@ -54,6 +54,12 @@ enum class CentroidReference {
 struct DetectorParams {
   // Families searched in one pass (they share the threshold and the region tree).
   std::vector<Family> families{Family(3), Family(4)};
+  // The ids in use (empty, the default: every id of the families). A marker read as
+  // another id is not reported (DetectionStats::unlisted counts it; lftag detect --why
+  // shows it as "unlisted"), and its place is not read again in the frame: a print of
+  // someone else's marker, or a misreading that lands outside the ids printed, never
+  // reaches the caller. Each id must be an id of at least one of the families.
+  std::vector<TagId> ids;
 
   // -- Binarisation: a pixel is black when darker than the mean of the M x M window
   //    around it by more than `threshold_offset` grey levels. The paper uses the plain

@@ -37,6 +37,7 @@ struct DetectionStats {
                                            // whose hypotheses match the squares' ink stops before)
   std::int64_t unambiguous = 0;            // no other id fitting within the decoding margin
   std::int64_t decoded = 0;                // the squares' ink matches the design: detections
+  std::int64_t unlisted = 0;               // markers read as an id not in DetectorParams::ids: not reported
   std::int64_t bowed = 0;                  // of them, read on a bowed grid (a bent sheet) where the flat
                                            // grid left the id in doubt
   std::int64_t second_looks = 0;           // patches examined again (see DetectorParams::second_look)
@@ -91,6 +92,7 @@ enum class Stage {
   ink,           // the squares' ink did not match the design on any side
   marker,        // outline read: the whole marker of the id read fitted under 0.75
   unexpected,    // read where a marker was expected (FrameHints), as another id or family
+  unlisted,      // read as an id not in DetectorParams::ids
   pose,          // no pose could be computed
   duplicate,     // a marker already found at its place
   detected,

@@ -411,6 +411,7 @@ void Annotator::build() {
   std::string overlay = o_.overlay.empty() ? (camera ? "outline+id+axes" : "outline+id") : overlay_flags(o_.overlay);
   if (o_.output.empty()) overlay.clear();  // nothing is drawn that nobody sees
   set(detect, "families", o_.families);
+  if (!o_.ids.empty()) set(detect, "ids", o_.ids);
   set(detect, "messages", "none");
   set(detect, "overlay", overlay.empty() ? "0" : overlay);
   lftag::gst::set_tunable_properties(G_OBJECT(detect), o_.params);
@@ -968,7 +969,8 @@ void add_annotate_command(CLI::App& app, int& status) {
     try {
       if (o.output.empty() && o.jsonl.empty())
         throw std::invalid_argument("nothing to write: give --output, --jsonl or both");
-      Family::parse_list(o.families);
+      DetectorParams checked;
+      set_families_and_ids(o, checked);
       if (!o.overlay.empty()) overlay_flags(o.overlay);
       if (!o.tracking && (o.smoothing || o.lost_after != Options().lost_after ||
                           o.full_detection_interval != Options().full_detection_interval))
