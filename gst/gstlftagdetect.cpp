@@ -1033,6 +1033,10 @@ static GstFlowReturn gst_lftag_detect_transform_ip(GstBaseTransform* trans, GstB
                  detections.size(), GST_TIME_ARGS(GST_BUFFER_PTS(buffer)),
                  hints.full_search ? "searched" : "not searched", stats.expected_found, hints.expected.size(),
                  stats.expected_measured);
+  if (stats.unlisted > 0)
+    GST_DEBUG_OBJECT(self,
+                     "%" G_GINT64_FORMAT " markers at %" GST_TIME_FORMAT " read as ids not in \"ids\": not reported",
+                     stats.unlisted, GST_TIME_ARGS(GST_BUFFER_PTS(buffer)));
   if ((stats.skipped_by_budget > 0 || stats.second_looks_skipped > 0 || stats.outline_reads_skipped > 0) &&
       !st.warned_budget) {
     const std::string text = gst_lftag_detect_budget_text(stats, st.detector->params());
