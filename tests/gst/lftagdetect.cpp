@@ -1264,6 +1264,11 @@ GST_START_TEST(test_ids) {
   fail_unless((push() == std::vector<std::string>{"3x3:42", "3x3:6789"}));
   gst_harness_teardown(h);
 
+  // With tracking, an unlisted marker never becomes a track, measured or predicted.
+  h = detector("ids=6789 tracking=true", frames.info);
+  for (int i = 0; i < 3; ++i) fail_unless(push() == std::vector<std::string>{"3x3:6789"});
+  gst_harness_teardown(h);
+
   expect_error("lftagtestsrc num-buffers=3 ! lftagdetect name=d families=3x3 ids=42,20000 ! fakesink",
                {"20000", "not an id of any family"}, GST_RESOURCE_ERROR);
 }
