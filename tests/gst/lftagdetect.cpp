@@ -1262,6 +1262,7 @@ GST_START_TEST(test_ids) {
   g_free(ids);
   g_object_set(e, "ids", nullptr, nullptr);
   fail_unless((push() == std::vector<std::string>{"3x3:42", "3x3:6789"}));
+  gst_object_unref(e);
   gst_harness_teardown(h);
 
   // With tracking, an unlisted marker never becomes a track, measured or predicted.
