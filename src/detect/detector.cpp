@@ -68,6 +68,7 @@ void DetectorParams::validate() const {
   if (!(tag_size > 0) || !std::isfinite(tag_size)) fail("the tag size must be positive");
   if (!(shape_choice_ratio >= 0)) fail("the shape choice ratio must be at least 0 (0: by the centroids alone)");
   if (camera) camera->validate();
+  if (ids_complete && ids.empty()) fail("ids_complete (ids-complete) needs the ids in use (ids), and none are listed");
   for (const TagId& id : ids)
     if (std::none_of(families.begin(), families.end(), [&](const Family& f) { return f.contains(id); }))
       fail("id " + id.to_decimal() + " is not an id of any family detected (the largest is " +
@@ -80,11 +81,11 @@ void DetectorParams::validate() const {
 
 namespace {
 auto fields(const DetectorParams& p) {
-  return std::tie(p.families, p.ids, p.threshold_window, p.threshold_offset, p.second_look, p.max_second_looks,
-                  p.max_candidates, p.deadline_ms, p.min_child_fraction, p.max_child_ratio, p.max_extra_children,
-                  p.dilation, p.centroid_reference, p.max_ink_ratio, p.min_spread_ratio, p.max_decode_error,
-                  p.max_cell_residual, p.min_pixels_per_unit, p.min_decode_margin, p.min_noise_margin, p.max_ink_spread,
-                  p.camera, p.tag_size, p.refine_pose, p.shape_choice_ratio);
+  return std::tie(p.families, p.ids, p.ids_complete, p.threshold_window, p.threshold_offset, p.second_look,
+                  p.max_second_looks, p.max_candidates, p.deadline_ms, p.min_child_fraction, p.max_child_ratio,
+                  p.max_extra_children, p.dilation, p.centroid_reference, p.max_ink_ratio, p.min_spread_ratio,
+                  p.max_decode_error, p.max_cell_residual, p.min_pixels_per_unit, p.min_decode_margin,
+                  p.min_noise_margin, p.max_ink_spread, p.camera, p.tag_size, p.refine_pose, p.shape_choice_ratio);
 }
 }  // namespace
 
@@ -339,8 +340,8 @@ std::optional<detail::OutlineReading> read_one_outline(const ImageView& work, co
   }
   --reads_left;
   ++reads;
-  std::optional<detail::OutlineReading> reading =
-      detail::read_outline(work, outline, f, p.min_pixels_per_unit, deadline, &read_places, expected);
+  std::optional<detail::OutlineReading> reading = detail::read_outline(
+      work, outline, f, p.min_pixels_per_unit, deadline, &read_places, expected, p.ids_complete ? &p.ids : nullptr);
   const Stage stage = reading ? detail::outline_stage(*reading, p) : Stage::alignment;
   if (stage == Stage::deadline) ++stats.skipped_by_deadline;
   // A place read and plainly refused is not read again in this frame: another outline of
@@ -361,6 +362,7 @@ std::optional<detail::OutlineReading> read_one_outline(const ImageView& work, co
       verdict->correlation = reading->correlation, verdict->marker_correlation = reading->marker_correlation;
       verdict->contrast = reading->contrast, verdict->margin = reading->margin;
       verdict->noise_margin = reading->noise_margin, verdict->evidence = reading->evidence;
+      verdict->listed_noise_margin = reading->listed_noise_margin, verdict->listed_evidence = reading->listed_evidence;
       verdict->model_ink = reading->model_ink;
       verdict->pixels_per_unit = reading->pixels_per_unit, verdict->smear = reading->smear;
       verdict->defocus = reading->defocus;

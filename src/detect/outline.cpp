@@ -728,10 +728,12 @@ class PixelModel {
   struct Reading {
     TagId id;
     double margin = 0;
-    double smear = 0;         // length of the motion blur that fits best, frame pixels
-    double noise_margin = 0;  // OutlineReading::noise_margin
-    double evidence = 0;      // OutlineReading::evidence
-    double ink = 0;           // OutlineReading::model_ink
+    double smear = 0;                // length of the motion blur that fits best, frame pixels
+    double noise_margin = 0;         // OutlineReading::noise_margin
+    double evidence = 0;             // OutlineReading::evidence
+    double ink = 0;                  // OutlineReading::model_ink
+    double listed_noise_margin = 0;  // OutlineReading::listed_noise_margin
+    double listed_evidence = 0;      // OutlineReading::listed_evidence
   };
 
   // The id whose predicted pixels fit the grey levels best (least squares with the
@@ -739,22 +741,24 @@ class PixelModel {
   // blur found while aligning, that fit best), found cell by cell from `start`; and the
   // least margin over the data cells: how much worse the runner-up position of its square
   // fits, per pixel of a cell over the contrast squared.
-  Reading read(TagId start, double pixels_per_unit, double contrast) const {
+  Reading read(TagId start, double pixels_per_unit, double contrast, const std::vector<TagId>* listed = nullptr) const {
     // The blurs are chosen on the whole marker of an id, one map smeared and blurred (the
     // model is linear), and the cells fitted once at that blur; a fit that moves squares is
     // the marker of another id, whose blur is chosen again. (Fitting the cells at every
     // blur cost 15 fits of every square's map under motion blur, most of a frame's time.)
     Choice choice = best_blur(start, pixels_per_unit);
-    Fit fit = fit_with(choice, pixels_per_unit, start);
+    Fit fit = fit_with(choice, pixels_per_unit, start, listed);
     if (fit.id != start)
       if (const Choice again = best_blur(fit.id, pixels_per_unit); again != choice)
-        choice = again, fit = fit_with(choice, pixels_per_unit, fit.id);
+        choice = again, fit = fit_with(choice, pixels_per_unit, fit.id, listed);
     return {fit.id,
             fit.least_gain / (pixels_per_unit * pixels_per_unit * 25 * contrast * contrast),
             cv::norm(smear_) * choice.scale,
             fit.noise_margin,
             fit.evidence,
-            contrast > 0 ? fit.ink / contrast : 0};
+            contrast > 0 ? fit.ink / contrast : 0,
+            fit.listed_noise_margin,
+            fit.listed_evidence};
   }
 
  private:
@@ -777,8 +781,10 @@ class PixelModel {
   struct Fit {
     TagId id;
     double rss = 0, ink = 0, least_gain = 0;
-    double noise_margin = 0;  // Reading::noise_margin
-    double evidence = 0;      // Reading::evidence
+    double noise_margin = 0;         // Reading::noise_margin
+    double evidence = 0;             // Reading::evidence
+    double listed_noise_margin = 0;  // Reading::listed_noise_margin
+    double listed_evidence = 0;      // Reading::listed_evidence
   };
 
   // A motion blur's length, as a scale of the one found while aligning (0: none), and an
@@ -824,13 +830,14 @@ class PixelModel {
   }
 
   // The cells fitted from `start` under `choice`, with their margins.
-  Fit fit_with(const Choice& choice, double pixels_per_unit, TagId start) const {
+  Fit fit_with(const Choice& choice, double pixels_per_unit, TagId start,
+               const std::vector<TagId>* listed = nullptr) const {
     const cv::Mat1f kernel = choice.scale == 0 ? cv::Mat1f() : smear_kernel(smear_ * choice.scale);
     const auto smear = [&](const cv::Mat1f& m) { return choice.scale == 0 ? m : smeared_by(m, kernel); };
     std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
     for (std::size_t i = 0; i < cells_.size(); ++i)
       for (int d = 0; d < 4; ++d) squares[i][d] = smear(squares_[i][d].share);
-    return fit_at(choice.blur * pixels_per_unit, smear(fixed_), squares, start);
+    return fit_at(choice.blur * pixels_per_unit, smear(fixed_), squares, start, listed);
   }
 
   // The variance of sum(delta * noise) over a rectangle of pixels, in units of the noise's
@@ -867,7 +874,7 @@ class PixelModel {
   }
 
   Fit fit_at(double sigma, const cv::Mat1f& fixed, const std::vector<std::array<cv::Mat1f, 4>>& smeared_squares,
-             TagId start) const {
+             TagId start, const std::vector<TagId>* listed = nullptr) const {
     // A copy only of what the sums below change (`total`); the squares' maps are read only.
     cv::Mat1f total = recycled_copy(blurred_by(fixed, sigma));
     std::vector<std::array<cv::Mat1f, 4>> squares(cells_.size());
@@ -951,6 +958,8 @@ class PixelModel {
     // The evidence: each move's worsening of the fit over the worsening the model predicts
     // for it, |p|^2 (the image's own misfit and noise take some of it away).
     fit.noise_margin = fit.evidence = std::numeric_limits<double>::infinity();
+    // Of moving cell i's square to d: the spread and the predicted worsening.
+    std::vector<std::array<double, 4>> spread_of(cells_.size(), {0, 0, 0, 0}), predicted_of = spread_of;
     for (std::size_t i = 0; i < cells_.size(); ++i) {
       const cv::Rect& r = squares_[i][0].rect;
       const cv::Rect& e = reach[i];
@@ -967,13 +976,98 @@ class PixelModel {
               delta(y, x) = squares[i][d](e.y + y, e.x + x) - squares[i][digit[i]](e.y + y, e.x + x);
         const double predicted = fit.ink * fit.ink * delta.dot(delta);  // before correlated_power filters delta
         const double spread = fit.ink * fit.ink * variance * correlated_power(delta, rho_x, rho_y);
+        spread_of[i][d] = spread, predicted_of[i][d] = predicted;
         fit.noise_margin = std::min(fit.noise_margin, spread > 0 ? gain[i][d] / (2 * std::sqrt(spread)) : 0.0);
         fit.evidence = std::min(fit.evidence, predicted > 0 ? gain[i][d] / predicted : 0.0);
       }
     }
     if (!std::isfinite(fit.noise_margin)) fit.noise_margin = 0;
     if (!std::isfinite(fit.evidence)) fit.evidence = 0;
+    if (listed)
+      std::tie(fit.listed_noise_margin, fit.listed_evidence) = listed_margins(
+          *listed, fit, digit, squares, total, sums, gain, spread_of, predicted_of, variance, rho_x, rho_y);
     return fit;
+  }
+
+  // The noise margin and the evidence of the fit's id against the other ids in `listed`,
+  // all the ids that may be in view (DetectorParams::ids_complete), the least over them:
+  // each with all its differing squares moved at once. The others are ranked by adding
+  // their squares' single moves, on either measure, and the kExactRivals nearest on each
+  // refitted exactly. Zeros when the id is not listed; infinite when it is alone.
+  std::pair<double, double> listed_margins(const std::vector<TagId>& listed, const Fit& fit,
+                                           const std::vector<int>& digit,
+                                           const std::vector<std::array<cv::Mat1f, 4>>& squares, const cv::Mat1f& total,
+                                           const Sums& sums, const std::vector<std::array<double, 4>>& gain,
+                                           const std::vector<std::array<double, 4>>& spread_of,
+                                           const std::vector<std::array<double, 4>>& predicted_of, double variance,
+                                           double rho_x, double rho_y) const {
+    constexpr std::size_t kExactRivals = 4;
+    if (std::find(listed.begin(), listed.end(), fit.id) == listed.end()) return {0.0, 0.0};
+    const auto digit_of = [&](TagId id, std::size_t i) { return id.digit(family_.data_index(cells_[i])); };
+    struct Rival {
+      double noise_margin, evidence;
+      TagId id;
+    };
+    std::vector<Rival> rivals;
+    for (const TagId& other : listed) {
+      if (other == fit.id) continue;
+      double worse = 0, spread = 0, predicted = 0;
+      for (std::size_t i = 0; i < cells_.size(); ++i)
+        if (const int d = digit_of(other, i); d != digit[i])
+          worse += gain[i][d], spread += spread_of[i][d], predicted += predicted_of[i][d];
+      rivals.push_back(
+          {spread > 0 ? worse / (2 * std::sqrt(spread)) : 0.0, predicted > 0 ? worse / predicted : 0.0, other});
+    }
+    const double inf = std::numeric_limits<double>::infinity();
+    if (rivals.empty()) return {inf, inf};
+    std::vector<TagId> nearest;
+    const std::size_t exact = std::min(kExactRivals, rivals.size());
+    for (const auto by : {&Rival::noise_margin, &Rival::evidence}) {
+      std::partial_sort(rivals.begin(), rivals.begin() + std::ptrdiff_t(exact), rivals.end(),
+                        [by](const Rival& a, const Rival& b) { return a.*by < b.*by; });
+      for (std::size_t k = 0; k < exact; ++k)
+        if (std::find(nearest.begin(), nearest.end(), rivals[k].id) == nearest.end()) nearest.push_back(rivals[k].id);
+    }
+    double least_margin = inf, least_evidence = inf;
+    for (const TagId& other : nearest) {
+      cv::Mat1f moved_total = total.clone();
+      Sums s = sums;
+      std::vector<int> now = digit;
+      cv::Mat1d delta(total.size(), 0.0);
+      for (std::size_t i = 0; i < cells_.size(); ++i) {
+        const int d = digit_of(other, i);
+        if (d == now[i]) continue;
+        s = moved_in(moved_total, s, squares, now, i, d);
+        const cv::Rect& r = squares_[i][0].rect;
+        const cv::Mat1f change = squares[i][d] - squares[i][now[i]];
+        moved_total(r) += change;
+        for (int y = 0; y < r.height; ++y)
+          for (int x = 0; x < r.width; ++x)
+            if (use_(r.y + y, r.x + x)) delta(r.y + y, r.x + x) += change(y, x);
+        now[i] = d;
+      }
+      const double worse = s.rss() - fit.rss, predicted = fit.ink * fit.ink * delta.dot(delta);
+      const double spread = fit.ink * fit.ink * variance * correlated_power(delta, rho_x, rho_y);
+      least_margin = std::min(least_margin, spread > 0 ? worse / (2 * std::sqrt(spread)) : 0.0);
+      least_evidence = std::min(least_evidence, predicted > 0 ? worse / predicted : 0.0);
+    }
+    return {least_margin, least_evidence};
+  }
+
+  // The sums with cell i's square moved from position now[i] to d, over `total`.
+  Sums moved_in(const cv::Mat1f& total, const Sums& sums, const std::vector<std::array<cv::Mat1f, 4>>& squares,
+                const std::vector<int>& now, std::size_t i, int d) const {
+    Sums s = sums;
+    const cv::Rect& r = squares_[i][0].rect;
+    for (int y = 0; y < r.height; ++y)
+      for (int x = 0; x < r.width; ++x) {
+        if (!use_(r.y + y, r.x + x)) continue;
+        const double delta = squares[i][d](y, x) - squares[i][now[i]](y, x);
+        if (delta == 0) continue;
+        const double c = total(r.y + y, r.x + x), g = grey_(r.y + y, r.x + x);
+        s.c += delta, s.cc += 2 * c * delta + delta * delta, s.gc += g * delta;
+      }
+    return s;
   }
 
   Family family_;
@@ -1153,7 +1247,8 @@ void ReadPlaces::add(int n, const cv::Matx33d& homography, const Family& family,
 
 std::optional<OutlineReading> read_outline(const ImageView& image, const std::array<cv::Point2d, 4>& coarse,
                                            const Family& family, double min_pixels_per_unit, const Deadline& deadline,
-                                           ReadPlaces* read_places, std::optional<TagId> expected) {
+                                           ReadPlaces* read_places, std::optional<TagId> expected,
+                                           const std::vector<TagId>* complete_ids) {
   const int side = family.side();
   // The frame around the coarse outline, with room for the alignment to move and for an
   // outline of the data squares only.
@@ -1580,7 +1675,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     if (out.pixels_per_unit <= kTemplateScale) {
       const PixelModel model(image, under, family, out.pixels_per_unit, smear);
       if (!model.valid()) return std::nullopt;
-      return model.read(sampled, out.pixels_per_unit, white - black);
+      return model.read(sampled, out.pixels_per_unit, white - black, complete_ids);
     }
     const cv::Rect region = PixelModel::pixels_read(image, under, family, out.pixels_per_unit, smear);
     if (region.empty()) return std::nullopt;
@@ -1597,7 +1692,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     const PixelModel model(ImageView(reduced), to_reduced * under, family, reduced_per_unit,
                            cv::Point2d(smear.x * sx, smear.y * sy));
     if (!model.valid()) return std::nullopt;
-    PixelModel::Reading r = model.read(sampled, reduced_per_unit, white - black);
+    PixelModel::Reading r = model.read(sampled, reduced_per_unit, white - black, complete_ids);
     r.smear *= out.pixels_per_unit / reduced_per_unit;  // frame pixels
     return r;
   };
@@ -1608,6 +1703,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
     out.margin = r.margin;
     out.noise_margin = r.noise_margin;
     out.evidence = r.evidence;
+    out.listed_noise_margin = r.listed_noise_margin, out.listed_evidence = r.listed_evidence;
     out.model_ink = r.ink;
     out.smear = r.smear / out.pixels_per_unit;
   };
@@ -1659,6 +1755,7 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
       out.noise_margin = std::min(out.noise_margin, again->noise_margin);
       out.model_ink = std::min(out.model_ink, again->ink);
       out.evidence = again->evidence;  // the final alignment's: the first reading's is a start
+      out.listed_noise_margin = again->listed_noise_margin, out.listed_evidence = again->listed_evidence;
       out.smear = std::max(out.smear, again->smear / out.pixels_per_unit);
       return out;
     }
@@ -1682,7 +1779,10 @@ Stage outline_stage(const OutlineReading& r, const DetectorParams& params) {
   if (r.correlation < kMinCorrelation) return Stage::structure;
   if (r.contrast < kMinContrast) return Stage::contrast;
   if (r.baseline_gap < kMinBaselineGap) return Stage::baselines;
-  if (r.margin < kMinMargin || r.evidence < kMinEvidence || !(r.model_ink > kMinModelInk)) return Stage::margin;
+  if (!(r.model_ink > kMinModelInk)) return Stage::margin;
+  if ((r.margin < kMinMargin || r.evidence < kMinEvidence) &&
+      !(params.ids_complete && r.listed_noise_margin >= kMinListedNoiseMargin && r.listed_evidence >= kMinEvidence))
+    return Stage::margin;
   if (r.marker_correlation < kMinMarkerCorrelation) return Stage::marker;
   return Stage::detected;
 }

@@ -503,31 +503,38 @@ std::vector<std::array<cv::Point2d, 4>> coarse_outlines(const BinaryImage& binar
 struct OutlineReading {
   bool read = false;  // the cells were read: `id` holds the reading
   TagId id;
-  cv::Matx33d homography;         // units -> frame pixels (as observed), in the marker's true turn
-  double correlation = 0;         // of the marker's fixed structure with the image (ECC)
-  double marker_correlation = 0;  // of the whole marker read, aligned again (ECC)
-  double contrast = 0;            // the white ring's grey level minus the cells' cores' (under
-                                  // a defocus found: as the template's own blur shows them)
-  double margin = 0;              // least, over the data cells, of how much worse the runner-up
-                                  // square position fits than the best: mean squared grey
-                                  // difference per sample over the contrast squared
-  double noise_margin = 0;        // standard deviations of the fit's residuals by which the
-                                  // least certain cell stands from another digit (least of
-                                  // the readings made; see Detection::noise_margin)
-  double evidence = 0;            // least, over the data cells and their other positions, of
-                                  // how much the fit worsens when the square moves there, over
-                                  // how much the model predicts (1: the image shows the whole
-                                  // difference; 0: it lies halfway), under the final alignment
-  double model_ink = 0;           // the ink (paper minus ink level) the pixel model fits to the
-                                  // whole marker of the id read, over `contrast` (least of the
-                                  // readings made)
-  double baseline_gap = 0;        // how much more the two baseline corners look like baselines
-                                  // than the other two (0..1 of the contrast)
-  double pixels_per_unit = 0;     // along the most foreshortened direction, at the centre
-  double smear = 0;               // length of the motion blur found, units (0: none)
-  double defocus = 0;             // Gaussian blur found beyond the pixels', units (0: none)
-  bool past_deadline = false;     // cut short by the frame's deadline: not acceptable
-  bool repeated = false;          // aligned where the frame's readings found a marker already: not read
+  cv::Matx33d homography;          // units -> frame pixels (as observed), in the marker's true turn
+  double correlation = 0;          // of the marker's fixed structure with the image (ECC)
+  double marker_correlation = 0;   // of the whole marker read, aligned again (ECC)
+  double contrast = 0;             // the white ring's grey level minus the cells' cores' (under
+                                   // a defocus found: as the template's own blur shows them)
+  double margin = 0;               // least, over the data cells, of how much worse the runner-up
+                                   // square position fits than the best: mean squared grey
+                                   // difference per sample over the contrast squared
+  double noise_margin = 0;         // standard deviations of the fit's residuals by which the
+                                   // least certain cell stands from another digit (least of
+                                   // the readings made; see Detection::noise_margin)
+  double evidence = 0;             // least, over the data cells and their other positions, of
+                                   // how much the fit worsens when the square moves there, over
+                                   // how much the model predicts (1: the image shows the whole
+                                   // difference; 0: it lies halfway), under the final alignment
+  double listed_noise_margin = 0;  // with the ids in use complete (DetectorParams::ids_complete):
+                                   // standard deviations of the fit's residuals by which the
+                                   // nearest other listed id, all its differing squares moved,
+                                   // fits worse (0: the id read is not listed; under the final
+                                   // alignment)
+  double listed_evidence = 0;      // the same rival's worsening over the model's prediction of
+                                   // it (as `evidence`, over all the squares that differ)
+  double model_ink = 0;            // the ink (paper minus ink level) the pixel model fits to the
+                                   // whole marker of the id read, over `contrast` (least of the
+                                   // readings made)
+  double baseline_gap = 0;         // how much more the two baseline corners look like baselines
+                                   // than the other two (0..1 of the contrast)
+  double pixels_per_unit = 0;      // along the most foreshortened direction, at the centre
+  double smear = 0;                // length of the motion blur found, units (0: none)
+  double defocus = 0;              // Gaussian blur found beyond the pixels', units (0: none)
+  bool past_deadline = false;      // cut short by the frame's deadline: not acceptable
+  bool repeated = false;           // aligned where the frame's readings found a marker already: not read
 };
 
 // Where a frame's outline readings found a marker (the aligned outer corners, frame
@@ -562,7 +569,8 @@ std::optional<OutlineReading> read_outline(const ImageView& image, const std::ar
                                            const Family& family,
                                            double min_pixels_per_unit = DetectorParams{}.min_pixels_per_unit,
                                            const Deadline& deadline = {}, ReadPlaces* read_places = nullptr,
-                                           std::optional<TagId> expected = std::nullopt);
+                                           std::optional<TagId> expected = std::nullopt,
+                                           const std::vector<TagId>* complete_ids = nullptr);
 
 // The checks an outline reading must pass to be a detection, each scale-free.
 constexpr double kMinStartCorrelation = 0.4;  // before the alignment, where the outline puts it
@@ -608,6 +616,16 @@ constexpr double kEvidenceNotReadAgain = kMinEvidence / 2;
 // areas, so a sharp reading's margin is at most 0.24 x model_ink squared, and a margin of
 // kMinMargin needs a model ink of 0.35; blur lowers the margin further.
 constexpr double kMinModelInk = 0.4;
+// With the ids in use complete (DetectorParams::ids_complete), a reading that the margin
+// and evidence checks refuse against the ids one square off is taken in when, against
+// every other listed id (all its differing squares moved), its evidence reaches
+// kMinEvidence and its noise margin this. The evidence keeps a listed id one square off,
+// whose square the image shows part of the way, the runner-up it is; the noise margin
+// asks the difference to stand out of the residuals. Three deviations, a round bound: the
+// field experiment's tuning set took its readings in at 2.8 or more (a list of its 60 ids
+// per family, or of 2,060 to 10,060), and its wrong readings that were listed stood at
+// 0.52 at most.
+constexpr double kMinListedNoiseMargin = 3;
 // The longest motion blur the alignment tries, units (the pixel model fits lengths up to
 // 16 % either side of the one found). A blur near the cells' 6-unit pitch leaves little of
 // a square's one-unit shifts; how much is left is the evidence check's to judge, cell by

@@ -51,7 +51,7 @@ constexpr Tunable field(const char* name, const char* nick, const char* blurb, d
 }
 }  // namespace detail
 
-constexpr std::size_t kTunables = 9;
+constexpr std::size_t kTunables = 10;
 
 inline const std::array<Tunable, kTunables>& tunables() {
   using detail::field;
@@ -70,6 +70,13 @@ inline const std::array<Tunable, kTunables>& tunables() {
           "second-look", "Second look",
           "Look again where no marker was found: at black regions shaped and shaded like a marker's border, and "
           "at small isolated clusters (enlarged, with a local threshold): shadowed, blurred, far and small markers",
+          0, 1),
+      field<&DetectorParams::ids_complete>(
+          "ids-complete", "Ids complete",
+          "The ids listed (ids) are every marker that may be in view: a reading from the grey levels that is "
+          "too close to an id one square off is then judged against the nearest other listed id instead, and "
+          "small or compressed markers are read more often. A marker in view whose id is not listed may then be "
+          "read as a listed neighbour: list every id printed. Needs ids",
           0, 1),
       field<&DetectorParams::max_ink_ratio>(
           "max-ink-ratio", "Maximum ink ratio",

@@ -86,6 +86,8 @@ nlohmann::json outline_json(const OutlineVerdict& v) {
                         {"margin", v.margin},
                         {"noise_margin", v.noise_margin},
                         {"evidence", v.evidence},
+                        {"listed_noise_margin", v.listed_noise_margin},
+                        {"listed_evidence", v.listed_evidence},
                         {"model_ink", v.model_ink},
                         {"pixels_per_unit", v.pixels_per_unit},
                         {"smear", v.smear},

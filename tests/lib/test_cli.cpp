@@ -441,6 +441,10 @@ TEST(Cli, EachTunableReachesTheDetectorsParameters) {
     t.set(p, other);
     EXPECT_EQ(t.get(p), other) << t.name;
     EXPECT_NE(p, defaults) << t.name;
+    if (p.ids_complete) {  // says something of the ids, which must then be given
+      EXPECT_THROW(p.validate(), std::invalid_argument) << t.name;
+      p.ids = {lftag::TagId(5)};
+    }
     EXPECT_NO_THROW(p.validate()) << t.name << " at " << other;
   }
 }

@@ -850,6 +850,58 @@ TEST(OutlineReading, EveryCellMustShowMostOfTheDifferenceItsDigitMakes) {
   }
 }
 
+TEST(OutlineReading, AgainstCompleteIdsTheRunnerUpIsTheNearestListedId) {
+  // A square moved 0.35 units towards its next position (evidence 0.3): refused against
+  // every id one square off. With the ids in use complete, the runner-up is the nearest
+  // other listed id: far from it (every square, or four, elsewhere) the reading is taken
+  // in; with the id one square off listed too, that one is the runner-up and the reading
+  // stays refused, as it does when its own id is not listed. Both directions: moved 0.65
+  // units (the near miss of the other id), it reads as that one, and is taken in only
+  // where that one is listed and this one is not.
+  const Family f(3);
+  const TagId id(6789);
+  const int cell = 4;
+  const int digit = id.digit(f.data_index(cell));
+  ASSERT_EQ(digit >> 1, 0) << "the square must be free to move right";
+  const TagId moved = id.with_digit(f.data_index(cell), digit | 2);
+  const TagId far_a(6789 ^ 0x3fff), far_b(6789 ^ 0x0ff0);  // 7 and 4 squares elsewhere
+  DetectorParams plain, complete;
+  complete.ids_complete = true;
+  struct Case {
+    double shift;
+    std::vector<TagId> listed;
+    std::optional<TagId> taken;  // what is taken in, if anything
+  };
+  for (const double ppu : {1.0, 2.5})
+    for (const Case& c : {Case{0.35, {id, far_a, far_b}, id}, Case{0.35, {id, moved, far_a}, std::nullopt},
+                          Case{0.35, {far_a, far_b}, std::nullopt}, Case{0.65, {moved, far_a, far_b}, moved},
+                          Case{0.65, {id, moved, far_b}, std::nullopt}}) {
+      const std::string what = std::to_string(ppu) + " px per unit, moved " + std::to_string(c.shift) + ", " +
+                               std::to_string(c.listed.size()) + " listed, first " + c.listed[0].to_decimal();
+      const Shifted m = shifted_marker(id, cell, c.shift, ppu);
+      const auto reading = read_outline(ImageView(m.image), m.corners, f, plain.min_pixels_per_unit, {}, nullptr,
+                                        std::nullopt, &c.listed);
+      ASSERT_TRUE(reading) << what;
+      EXPECT_FALSE(acceptable(*reading, plain)) << what;
+      complete.ids = c.listed;
+      EXPECT_EQ(acceptable(*reading, complete), c.taken.has_value())
+          << what << ": read " << reading->id.to_decimal() << ", listed noise margin " << reading->listed_noise_margin;
+      if (c.taken) {
+        EXPECT_EQ(reading->id, *c.taken) << what;
+        EXPECT_GE(reading->listed_noise_margin, kMinListedNoiseMargin) << what;
+        EXPECT_GE(reading->listed_evidence, kMinEvidence) << what;
+      } else {
+        // On a render without noise the neighbour stands many deviations away: the
+        // evidence (0.3 of the difference shown) is what keeps it the runner-up.
+        EXPECT_LT(reading->listed_evidence, kMinEvidence) << what;
+      }
+    }
+  // Complete ids need ids.
+  DetectorParams none;
+  none.ids_complete = true;
+  EXPECT_THROW(none.validate(), std::invalid_argument);
+}
+
 TEST(OutlineReading, ASquareFadedIntoThePaperIsNoEvidence) {
   // A data square printed fainter than the rest (glare, a shadow's edge) is no evidence
   // for any position, whichever it seems to fit. At half the ink it reads. At 0.3 and a

@@ -60,6 +60,13 @@ struct DetectorParams {
   // someone else's marker, or a misreading that lands outside the ids printed, never
   // reaches the caller. Each id must be an id of at least one of the families.
   std::vector<TagId> ids;
+  // The ids listed are every marker that may be in view (a closed set, as a square-marker
+  // system's dictionary is). A reading from the grey levels (an outline reading) that its
+  // margins against every id one square off refuse is then judged against the nearest
+  // other listed id instead, which differs in several squares: it passes when that id
+  // fits kMinListedNoiseMargin standard deviations worse. A marker in view whose id is not
+  // listed may then be read as a listed neighbour: list every id printed. Needs `ids`.
+  bool ids_complete = false;
 
   // -- Binarisation: a pixel is black when darker than the mean of the M x M window
   //    around it by more than `threshold_offset` grey levels. The paper uses the plain

@@ -119,21 +119,23 @@ struct OutlineVerdict {
   bool border = false;                   // a read of a border proposal
   std::array<cv::Point2d, 4> outline{};  // the coarse outline read from, frame pixels
   Stage stage = Stage::detected;
-  std::optional<TagId> reading;   // the id read, when reading ran
-  double correlation = 0;         // of the aligned structure (of the start when one
-                                  // far under the resolution bound was not aligned;
-                                  // 0 when it did not align)
-  double marker_correlation = 0;  // of the whole marker of the id read
-  double contrast = 0;            // white ring minus the cells' cores, grey levels
-                                  // (under a defocus: as the template's blur shows it)
-  double margin = 0;              // how much worse each cell's runner-up fits (least)
-  double noise_margin = 0;        // the same in standard deviations of the noise
-  double evidence = 0;            // least share of each cell's predicted difference
-                                  // to its other positions that the image shows
-  double model_ink = 0;           // the ink the pixel model fits, over `contrast`
-  double pixels_per_unit = 0;     // along the most foreshortened direction
-  double smear = 0;               // length of the motion blur found, units
-  double defocus = 0;             // Gaussian defocus found, units (sigma)
+  std::optional<TagId> reading;    // the id read, when reading ran
+  double correlation = 0;          // of the aligned structure (of the start when one
+                                   // far under the resolution bound was not aligned;
+                                   // 0 when it did not align)
+  double marker_correlation = 0;   // of the whole marker of the id read
+  double contrast = 0;             // white ring minus the cells' cores, grey levels
+                                   // (under a defocus: as the template's blur shows it)
+  double margin = 0;               // how much worse each cell's runner-up fits (least)
+  double noise_margin = 0;         // the same in standard deviations of the noise
+  double listed_noise_margin = 0;  // with DetectorParams::ids_complete: noise margin and evidence
+  double listed_evidence = 0;      // against the nearest other listed ids (0: the id read is not listed)
+  double evidence = 0;             // least share of each cell's predicted difference
+                                   // to its other positions that the image shows
+  double model_ink = 0;            // the ink the pixel model fits, over `contrast`
+  double pixels_per_unit = 0;      // along the most foreshortened direction
+  double smear = 0;                // length of the motion blur found, units
+  double defocus = 0;              // Gaussian defocus found, units (sigma)
 };
 
 // One black region whose convex hull is a quadrilateral, and what its grey levels say of
