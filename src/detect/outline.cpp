@@ -891,20 +891,7 @@ class PixelModel {
     }
     Sums sums = sums_of(total);
     // The sums with cell i's square moved from its current position to d.
-    const auto moved = [&](std::size_t i, int d) {
-      Sums s = sums;
-      const cv::Rect& r = squares_[i][0].rect;
-      const cv::Rect& e = reach[i];
-      for (int y = e.y; y < e.y + e.height; ++y)
-        for (int x = e.x; x < e.x + e.width; ++x) {
-          if (!use_(r.y + y, r.x + x)) continue;
-          const double delta = squares[i][d](y, x) - squares[i][digit[i]](y, x);
-          if (delta == 0) continue;
-          const double c = total(r.y + y, r.x + x), g = grey_(r.y + y, r.x + x);
-          s.c += delta, s.cc += 2 * c * delta + delta * delta, s.gc += g * delta;
-        }
-      return s;
-    };
+    const auto moved = [&](std::size_t i, int d) { return moved_in(total, sums, squares, digit, i, d, reach[i]); };
     for (int pass = 0; pass < 4; ++pass) {
       bool changed = false;
       for (std::size_t i = 0; i < cells_.size(); ++i) {
@@ -1037,7 +1024,7 @@ class PixelModel {
       for (std::size_t i = 0; i < cells_.size(); ++i) {
         const int d = digit_of(other, i);
         if (d == now[i]) continue;
-        s = moved_in(moved_total, s, squares, now, i, d);
+        s = moved_in(moved_total, s, squares, now, i, d, cv::Rect(cv::Point(), squares_[i][0].rect.size()));
         const cv::Rect& r = squares_[i][0].rect;
         const cv::Mat1f change = squares[i][d] - squares[i][now[i]];
         moved_total(r) += change;
@@ -1054,13 +1041,14 @@ class PixelModel {
     return {least_margin, least_evidence};
   }
 
-  // The sums with cell i's square moved from position now[i] to d, over `total`.
+  // The sums with cell i's square moved from position now[i] to d, over `total`: only
+  // `reach` (within the square's rectangle) can change.
   Sums moved_in(const cv::Mat1f& total, const Sums& sums, const std::vector<std::array<cv::Mat1f, 4>>& squares,
-                const std::vector<int>& now, std::size_t i, int d) const {
+                const std::vector<int>& now, std::size_t i, int d, const cv::Rect& reach) const {
     Sums s = sums;
     const cv::Rect& r = squares_[i][0].rect;
-    for (int y = 0; y < r.height; ++y)
-      for (int x = 0; x < r.width; ++x) {
+    for (int y = reach.y; y < reach.y + reach.height; ++y)
+      for (int x = reach.x; x < reach.x + reach.width; ++x) {
         if (!use_(r.y + y, r.x + x)) continue;
         const double delta = squares[i][d](y, x) - squares[i][now[i]](y, x);
         if (delta == 0) continue;
