@@ -505,39 +505,37 @@ static void gst_lftag_detect_set_property(GObject* object, guint prop_id, const 
     return;
   }
 
+  /* A text value is parsed outside the lock by `parse`. One that does not parse is refused
+   * on the bus (a warning now, while playing; an error when the element starts, for a
+   * value set before it had a bus), remembered in `error` until a good value clears it,
+   * and the setting stays as it was. */
+  const auto parsed = [&](const char* name, std::string Settings::*error, const auto& parse) {
+    const gchar* text = g_value_get_string(value);
+    try {
+      parse(text);
+      return true;
+    } catch (const std::exception& e) {
+      const std::string refusal = lftag::gst::refuse_value(GST_ELEMENT(self), name, text, e.what());
+      GST_OBJECT_LOCK(self);
+      self->settings->*error = refusal;
+      GST_OBJECT_UNLOCK(self);
+      return false;
+    }
+  };
   std::vector<Family> families;
   std::string families_text;
   std::vector<lftag::TagId> ids;
-  if (prop_id == PROP_IDS) {
-    /* Refused as the families are: a list that does not parse leaves the ids as they
-     * were. An id of no family searched fails when the detector is built. */
-    const gchar* text = g_value_get_string(value);
-    try {
-      if (text && *text) ids = lftag::parse_id_list(text);
-    } catch (const std::exception& e) {
-      const std::string refusal = lftag::gst::refuse_value(GST_ELEMENT(self), "ids", text, e.what());
-      GST_OBJECT_LOCK(self);
-      self->settings->ids_error = refusal;
-      GST_OBJECT_UNLOCK(self);
-      return;
-    }
-  }
-  if (prop_id == PROP_FAMILIES) {
-    /* "3x3, 4X4" is read as 3x3,4x4. A value that names no family is refused on the bus
-     * (a warning now, while playing; an error when the element starts, for a value set
-     * before it had a bus) and the families stay. Text is parsed outside the lock. */
-    const gchar* text = g_value_get_string(value);
-    try {
-      families = Family::parse_list(text ? text : DEFAULT_PROP_FAMILIES);
-      for (const Family& f : families) families_text += (families_text.empty() ? "" : ",") + f.name();
-    } catch (const std::exception& e) {
-      const std::string refusal = lftag::gst::refuse_value(GST_ELEMENT(self), "families", text, e.what());
-      GST_OBJECT_LOCK(self);
-      self->settings->families_error = refusal;
-      GST_OBJECT_UNLOCK(self);
-      return;
-    }
-  }
+  /* "3x3, 4X4" is read as 3x3,4x4; unset, the default. */
+  if (prop_id == PROP_FAMILIES && !parsed("families", &Settings::families_error, [&](const gchar* text) {
+        families = Family::parse_list(text ? text : DEFAULT_PROP_FAMILIES);
+        for (const Family& f : families) families_text += (families_text.empty() ? "" : ",") + f.name();
+      }))
+    return;
+  /* Unset or empty: every id. An id of no family searched fails when the detector is built. */
+  if (prop_id == PROP_IDS && !parsed("ids", &Settings::ids_error, [&](const gchar* text) {
+        if (text && *text) ids = lftag::parse_id_list(text);
+      }))
+    return;
 
   GST_OBJECT_LOCK(self);
   Settings& s = *self->settings;
